@@ -1,0 +1,155 @@
+"""Octant pooling: the eight octant means of each neighbourhood in its local frame.
+
+An octant with no neighbour takes the mean of the whole neighbourhood instead, so
+nothing is ever NaN and adding a constant to every value adds it to every octant mean.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["N_OCTANTS", "octant_index", "coordinate_octant_means", "OctantPooling"]
+
+N_OCTANTS = 8
+DTYPE = np.float32  # features from hop 2 on (see RPointHopTransformer.transform)
+QUERY_BLOCK = 128  # queries pooled at a time: a block of ~150 channels stays in cache
+
+# Coordinates within this fraction of the neighbourhood's extent of an octant boundary
+# count as positive. A point exactly on a boundary (a coplanar neighbour's normal
+# coordinate, a duplicate of the query) then lands in the same octant in every frame,
+# instead of flipping with the last bit of floating point rounding.
+_BOUNDARY_TOLERANCE = 1e-9
+
+
+def octant_index(local: np.ndarray) -> np.ndarray:
+    """Octant of every neighbour: bit 2 for a positive first coordinate, bit 1 for the
+    second, bit 0 for the third.
+
+    Parameters
+    ----------
+    local : ndarray of shape (3, q, k)
+        Neighbour coordinates in each query's local frame, as planes.
+
+    Returns
+    -------
+    octant : ndarray of shape (q, k), int64, values in 0..7
+    """
+    extent = np.abs(local).max(axis=(0, 2))  # (q,)
+    tol = -_BOUNDARY_TOLERANCE * extent[:, None]
+    return (
+        (local[0] >= tol).astype(np.int64) * 4
+        + (local[1] >= tol).astype(np.int64) * 2
+        + (local[2] >= tol).astype(np.int64)
+    )
+
+
+def _counts(octant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row id ``o * q + i`` of every neighbour, and the neighbour count of every row."""
+    q = octant.shape[0]
+    rows = (octant * q + np.arange(q)[:, None]).ravel()
+    return rows, np.bincount(rows, minlength=N_OCTANTS * q)
+
+
+def coordinate_octant_means(local: np.ndarray, octant: np.ndarray) -> np.ndarray:
+    """Hop-1 attributes: octant means of the local coordinates.
+
+    Parameters
+    ----------
+    local : ndarray of shape (3, q, k)
+    octant : ndarray of shape (q, k)
+        From :func:`octant_index`.
+
+    Returns
+    -------
+    attributes : ndarray of shape (q, 24)
+        Ordered octant-major: ``attributes[i, 3 * o + d]`` is coordinate ``d`` of the
+        mean of octant ``o``.
+    """
+    _, q, k = local.shape
+    rows, counts = _counts(octant)
+    out = np.empty((q, N_OCTANTS, 3))
+    for d in range(3):
+        sums = np.bincount(rows, weights=local[d].ravel(), minlength=N_OCTANTS * q)
+        means = sums.reshape(N_OCTANTS, q) / np.maximum(counts, 1).reshape(N_OCTANTS, q)
+        empty = counts.reshape(N_OCTANTS, q) == 0
+        if empty.any():
+            whole = local[d].mean(axis=1)  # (q,)
+            means = np.where(empty, whole[None, :], means)
+        out[:, :, d] = means.T
+    return out.reshape(q, N_OCTANTS * 3)
+
+
+class OctantPooling:
+    """Sparse operator from per-point feature channels to per-query octant means.
+
+    The operator is kept as consecutive blocks of :data:`QUERY_BLOCK` queries: pooling
+    and reordering a block while it is in the CPU cache is much faster than doing so for
+    the whole pooled tensor, which for the last hop is several megabytes.
+
+    Parameters
+    ----------
+    octant : ndarray of shape (q, k)
+        Octant of every neighbour, from :func:`octant_index`.
+    neighbors : ndarray of shape (q, k), int
+        Row of each neighbour among the ``n_sources`` points whose features are pooled.
+    n_sources : int
+    """
+
+    def __init__(self, octant: np.ndarray, neighbors: np.ndarray, n_sources: int) -> None:
+        q, k = octant.shape
+        # Matrix rows are (query, octant) pairs, query-major. Within a row the neighbours
+        # keep their distance order (a stable sort of each query's octants; 8-bit keys
+        # sort by radix), so the sums run in an order that does not depend on how the
+        # cloud's rows are numbered: permuting the input permutes the output exactly.
+        within = np.argsort(octant.astype(np.uint8), axis=1, kind="stable")
+        order = (within + (np.arange(q) * k)[:, None]).ravel()
+        rows = (np.arange(q)[:, None] * N_OCTANTS + octant).ravel()[order]
+        counts = np.bincount(rows, minlength=N_OCTANTS * q)
+        index_type = np.int32 if max(n_sources, rows.size) < 2**31 else np.int64
+        indptr = np.zeros(N_OCTANTS * q + 1, dtype=index_type)
+        np.cumsum(counts, out=indptr[1:])
+        data = (1.0 / np.maximum(counts, 1)).astype(DTYPE)[rows]
+        indices = neighbors.ravel()[order].astype(index_type)
+        counts = counts.reshape(q, N_OCTANTS)
+        self.n_queries = q
+        self.n_sources = n_sources
+        self._arrays = (data, indices, indptr)
+        self.fill_weights = (counts / k).astype(DTYPE)  # (q, 8): share of each octant
+        self.empty = counts == 0  # (q, 8)
+        self.blocks = []
+        for start in range(0, q, QUERY_BLOCK):
+            stop = min(q, start + QUERY_BLOCK)
+            lo, hi = indptr[start * N_OCTANTS], indptr[stop * N_OCTANTS]
+            block_ptr = indptr[start * N_OCTANTS : stop * N_OCTANTS + 1] - lo
+            matrix = sp.csr_matrix(
+                (data[lo:hi], indices[lo:hi], block_ptr),
+                shape=((stop - start) * N_OCTANTS, n_sources),
+            )
+            self.blocks.append((start, stop, matrix))
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self._arrays) + self.fill_weights.nbytes + self.empty.nbytes
+
+    def __call__(self, features: np.ndarray) -> np.ndarray:
+        """Pool features ``(n_channels, n_sources)`` into ``(n_channels, 8, q)``.
+
+        Each block of queries is pooled, its empty octants filled, and transposed into
+        place while it is small enough to stay in the CPU cache.
+        """
+        n_channels = features.shape[0]
+        sources_major = np.ascontiguousarray(features.T)  # (n_sources, c)
+        out = np.empty((n_channels, N_OCTANTS, self.n_queries), dtype=features.dtype)
+        for start, stop, matrix in self.blocks:
+            pooled = (matrix @ sources_major).reshape(stop - start, N_OCTANTS, n_channels)
+            empty = self.empty[start:stop]
+            if empty.any():
+                # Empty octants take the neighbourhood mean: the count-weighted mean of
+                # the octant means (a batched product over queries, so every query's
+                # sum runs the same way wherever it sits).
+                whole = np.matmul(self.fill_weights[start:stop, None, :], pooled)[:, 0]
+                qi, oi = np.nonzero(empty)
+                pooled[qi, oi] = whole[qi]
+            out[:, :, start:stop] = pooled.transpose(2, 1, 0)
+        return out

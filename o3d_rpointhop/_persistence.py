@@ -1,0 +1,162 @@
+"""Model files: a plain ``.npz`` of numeric arrays plus JSON metadata, read without pickle.
+
+Layout (format version 1)::
+
+    metadata           0-d str array, JSON: format, format_version, library_version,
+                       params, n_hops, n_features_out, n_training_clouds
+    hop{h}_kernels     (n_channels, dim, dim) float64
+    hop{h}_means       (n_channels, dim) float64
+    hop{h}_energies    (n_channels, dim) float64
+    hop{h}_selected    (n_selected,) int64
+"""
+
+from __future__ import annotations
+
+import json
+import numbers
+import zipfile
+from os import PathLike
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ._version import __version__
+
+if TYPE_CHECKING:
+    from .rpointhop import RPointHopTransformer
+
+FORMAT_NAME = "o3d-rpointhop-model"
+FORMAT_VERSION = 1
+
+# Parameters stored in a model file (n_jobs is a property of the machine, not the model).
+_STORED_PARAMS = (
+    "n_neighbors",
+    "hop_sizes",
+    "lrf_neighbors",
+    "energy_threshold",
+    "scale",
+    "fit_subsample",
+    "random_state",
+)
+
+
+def save_model(model: RPointHopTransformer, path: str | PathLike) -> None:
+    params = {}
+    for name in _STORED_PARAMS:
+        value = getattr(model, name)
+        if isinstance(value, (tuple, list)):
+            value = [v.item() if isinstance(v, np.generic) else v for v in value]
+        elif isinstance(value, np.generic):
+            value = value.item()
+        elif name == "random_state" and not isinstance(value, (numbers.Integral, type(None))):
+            value = None  # a RandomState object has no portable form
+        params[name] = value
+    meta = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "library_version": __version__,
+        "params": params,
+        "n_hops": len(model.kernels_),
+        "n_features_out": int(model.n_features_out_),
+        "n_training_clouds": int(model.n_training_clouds_),
+    }
+    arrays = {"metadata": np.array(json.dumps(meta))}
+    for h in range(len(model.kernels_)):
+        arrays[f"hop{h}_kernels"] = np.asarray(model.kernels_[h], dtype=np.float64)
+        arrays[f"hop{h}_means"] = np.asarray(model.means_[h], dtype=np.float64)
+        arrays[f"hop{h}_energies"] = np.asarray(model.energies_[h], dtype=np.float64)
+        arrays[f"hop{h}_selected"] = np.asarray(model.selected_[h], dtype=np.int64)
+    np.savez_compressed(path, **arrays)
+
+
+def _invalid(path, why: str) -> ValueError:
+    return ValueError(f"{path} is not a valid {FORMAT_NAME} file: {why}")
+
+
+def load_model(cls: type[RPointHopTransformer], path: str | PathLike) -> RPointHopTransformer:
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"no such model file: {path}")
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise _invalid(path, f"cannot be read as an .npz archive ({exc})") from exc
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise _invalid(path, "it holds a single array, not an .npz archive")
+    try:
+        with archive:
+            return _from_arrays(cls, path, archive)
+    except (zipfile.BadZipFile, EOFError, OSError) as exc:
+        raise _invalid(path, f"damaged or incomplete archive ({exc})") from exc
+
+
+def _entry(path, archive, key: str) -> np.ndarray:
+    """One array of the archive, refusing anything that would need pickle."""
+    if key not in archive.files:
+        raise _invalid(path, f"no {key!r} entry")
+    try:
+        return archive[key]
+    except ValueError as exc:  # object arrays: numpy refuses them without pickle
+        raise _invalid(path, f"entry {key!r} would need pickle to load ({exc})") from exc
+
+
+def _from_arrays(cls, path, archive) -> RPointHopTransformer:
+    try:
+        meta = json.loads(str(_entry(path, archive, "metadata")[()]))
+    except (ValueError, TypeError) as exc:
+        raise _invalid(path, f"metadata is not JSON ({exc})") from exc
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        raise _invalid(path, "its metadata does not name this format")
+    version = meta.get("format_version")
+    if not isinstance(version, int) or version < 1:
+        raise _invalid(path, f"bad format_version {version!r}")
+    if version > FORMAT_VERSION:
+        raise ValueError(
+            f"{path} uses model format version {version}, but this o3d-rpointhop "
+            f"({__version__}) reads up to version {FORMAT_VERSION}; upgrade o3d-rpointhop"
+        )
+    params = dict(meta.get("params", {}))
+    unknown = set(params) - set(_STORED_PARAMS)
+    if unknown:
+        raise _invalid(path, f"unknown parameters {sorted(unknown)}")
+    for name in ("n_neighbors", "hop_sizes"):
+        if name in params and isinstance(params[name], list):
+            params[name] = tuple(params[name])
+    model = cls(**params)
+    config = model._hop_config()  # re-validates the stored parameters
+    n_hops = meta.get("n_hops")
+    if n_hops != config.n_hops:
+        raise _invalid(path, f"n_hops={n_hops!r} does not match n_neighbors")
+    kernels, means, energies, selected = [], [], [], []
+    n_channels = 1
+    for h in range(n_hops):
+        dim = 24 if h == 0 else 8
+        k, b, e, s = (
+            _entry(path, archive, f"hop{h}_{name}")
+            for name in ("kernels", "means", "energies", "selected")
+        )
+        if k.shape != (n_channels, dim, dim) or b.shape != e.shape or e.shape != (n_channels, dim):
+            raise _invalid(path, f"hop {h + 1} arrays have inconsistent shapes")
+        if not (np.isfinite(k).all() and np.isfinite(b).all() and np.isfinite(e).all()):
+            raise _invalid(path, f"hop {h + 1} holds non-finite values")
+        if s.ndim != 1 or s.size == 0 or not np.issubdtype(s.dtype, np.integer):
+            raise _invalid(path, f"hop {h + 1} has no valid channel selection")
+        if s.min() < 0 or s.max() >= n_channels * dim or np.any(np.diff(s) <= 0):
+            raise _invalid(path, f"hop {h + 1} selects channels out of range")
+        kernels.append(k.astype(np.float64))
+        means.append(b.astype(np.float64))
+        energies.append(e.astype(np.float64))
+        selected.append(s.astype(np.int64))
+        n_channels = s.size
+    if meta.get("n_features_out") != n_channels:
+        raise _invalid(path, "n_features_out does not match the last hop")
+    model.kernels_, model.means_, model.energies_, model.selected_ = (
+        kernels,
+        means,
+        energies,
+        selected,
+    )
+    model.n_features_in_ = 3
+    model.n_features_out_ = n_channels
+    model.n_training_clouds_ = int(meta.get("n_training_clouds", 0))
+    return model

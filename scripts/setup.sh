@@ -1,0 +1,32 @@
+#!/bin/sh
+# Set up o3d-rpointhop in ./.venv: the system libraries Open3D's wheel links against
+# (on Debian/Ubuntu, installed with apt-get when missing), a virtual environment, and the
+# package with its test dependencies. Safe to run again.
+set -eu
+cd "$(dirname "$0")/.."
+PYTHON=${PYTHON:-python3}
+
+missing=""
+for lib in libusb-1.0.so.0 libGL.so.1 libEGL.so.1 libgomp.so.1 libX11.so.6; do
+    if ! (ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null) | grep -q "$lib"; then
+        missing="yes"
+    fi
+done
+if ! "$PYTHON" -c "import ensurepip, venv" >/dev/null 2>&1; then
+    missing="yes"
+fi
+if [ -n "$missing" ] && command -v apt-get >/dev/null 2>&1; then
+    SUDO=""
+    [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    echo "setup: installing system libraries for Open3D (libusb-1.0-0, libgl1, libegl1, libgomp1)"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq \
+        libusb-1.0-0 libgl1 libegl1 libgomp1 libx11-6 python3-venv >/dev/null
+fi
+
+if [ ! -x .venv/bin/python ]; then
+    "$PYTHON" -m venv .venv
+fi
+.venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"
+echo "setup: ready (.venv/bin/o3d-rpointhop, .venv/bin/python -m pytest)"

@@ -1,0 +1,108 @@
+"""The o3d-rpointhop command line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from o3d_rpointhop import RPointHopTransformer
+from o3d_rpointhop.cli import main
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.io import read_cloud, write_cloud
+
+
+def _write(path, points):
+    write_cloud(path, points)
+    return str(path)
+
+
+def test_fit_then_describe(tmp_path, capsys):
+    clouds = [_write(tmp_path / f"c{i}.ply", make_object(300, shape_seed=i)) for i in range(3)]
+    model_path = tmp_path / "model.npz"
+    assert main(["fit", *clouds, "-o", str(model_path), "--random-state", "0"]) == 0
+    assert "3 clouds" in capsys.readouterr().out
+    model = RPointHopTransformer.load(model_path)
+
+    query = _write(tmp_path / "q.pcd", make_object(250, shape_seed=9))
+    out = tmp_path / "desc.npy"
+    assert main(["describe", query, "--model", str(model_path), "-o", str(out)]) == 0
+    desc = np.load(out)
+    np.testing.assert_array_equal(desc, model.transform(read_cloud(query)))
+
+
+def test_fit_passes_hop_parameters(tmp_path):
+    clouds = [_write(tmp_path / f"c{i}.npy", make_object(200, shape_seed=i)) for i in range(2)]
+    model_path = tmp_path / "m.npz"
+    args = [
+        "fit",
+        *clouds,
+        "-o",
+        str(model_path),
+        "--n-neighbors",
+        "16,16",
+        "--hop-sizes",
+        "1.0,0.5",
+        "--lrf-neighbors",
+        "20",
+        "--energy-threshold",
+        "0.01",
+    ]
+    assert main(args) == 0
+    model = RPointHopTransformer.load(model_path)
+    assert model.n_neighbors == (16, 16) and model.hop_sizes == (1.0, 0.5)
+    assert model.lrf_neighbors == 20 and model.energy_threshold == 0.01
+
+
+def test_demo_writes_its_outputs(tmp_path, capsys):
+    assert main(["demo", "--output-dir", str(tmp_path / "out")]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    for path in summary["outputs"]:
+        assert (tmp_path / "out").joinpath(path.split("/")[-1]).is_file()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["describe", "missing.ply", "--model", "m.npz", "-o", "d.npy"], "no such file"),
+        (["fit", "bad.ply", "-o", "m.npz"], "read no points"),
+        (["fit", "cloud.foo", "-o", "m.npz"], "unknown point cloud format"),
+        (["fit", "small.npy", "-o", "m.npz"], "too few"),
+    ],
+)
+def test_bad_input_exits_nonzero_with_a_message(tmp_path, monkeypatch, capsys, args, message):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.ply").write_text("not a ply file")
+    (tmp_path / "cloud.foo").write_text("1 2 3")
+    np.save(tmp_path / "small.npy", make_object(20))
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("o3d-rpointhop: error:") and message in err
+
+
+def test_usage_errors_exit_2(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["fit"])
+    assert exc.value.code == 2
+
+
+def test_read_cloud_formats(tmp_path):
+    pts = make_object(100, shape_seed=3)
+    for name in ("a.ply", "a.pcd", "a.xyz", "a.npy"):
+        _write(tmp_path / name, pts)
+        np.testing.assert_allclose(np.asarray(read_cloud(tmp_path / name).points), pts, atol=1e-6)
+    np.savetxt(tmp_path / "a.csv", np.c_[pts, np.ones(100)], delimiter=",")
+    np.testing.assert_allclose(np.asarray(read_cloud(tmp_path / "a.csv").points), pts)
+    np.savez(tmp_path / "a.npz", points=pts)
+    np.testing.assert_allclose(np.asarray(read_cloud(tmp_path / "a.npz").points), pts)
+    bad = pts.copy()
+    bad[5, 1] = np.nan
+    np.save(tmp_path / "nan.npy", bad)
+    with pytest.raises(ValueError, match="NaN"):
+        read_cloud(tmp_path / "nan.npy")
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    pcd.estimate_normals()
+    write_cloud(tmp_path / "n.ply", pcd)
+    assert read_cloud(tmp_path / "n.ply").has_normals()
