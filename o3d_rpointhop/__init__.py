@@ -1,7 +1,44 @@
-"""o3d-rpointhop: unsupervised, rotation-invariant R-PointHop point descriptors for Open3D."""
+"""o3d-rpointhop: unsupervised, rotation-invariant R-PointHop point descriptors and
+global-to-local registration for Open3D and scikit-learn."""
 
 from ._version import __version__
+from .correspondences import Correspondences, find_correspondences
 from .fpfh import FPFHTransformer
+from .open3d_interop import to_open3d_feature, to_point_cloud
+from .registration import (
+    FGRGlobal,
+    GeneralizedICP,
+    MultiScaleICP,
+    PointToPlaneICP,
+    PointToPointICP,
+    RANSACGlobal,
+    RegistrationPipeline,
+    RegistrationResult,
+    RegistrationStep,
+    SVDGlobal,
+    register,
+)
 from .rpointhop import RPointHopTransformer
+from .transforms import rigid_transform
 
-__all__ = ["FPFHTransformer", "RPointHopTransformer", "__version__"]
+__all__ = [
+    "Correspondences",
+    "FGRGlobal",
+    "FPFHTransformer",
+    "GeneralizedICP",
+    "MultiScaleICP",
+    "PointToPlaneICP",
+    "PointToPointICP",
+    "RANSACGlobal",
+    "RPointHopTransformer",
+    "RegistrationPipeline",
+    "RegistrationResult",
+    "RegistrationStep",
+    "SVDGlobal",
+    "__version__",
+    "find_correspondences",
+    "register",
+    "rigid_transform",
+    "to_open3d_feature",
+    "to_point_cloud",
+]

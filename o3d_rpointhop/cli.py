@@ -37,10 +37,10 @@ def _sizes(text: str) -> tuple[float | int, ...]:
     return tuple(values)
 
 
-def _load_model(path: str):
+def _load_model(path: str | None):
     from .rpointhop import RPointHopTransformer
 
-    return RPointHopTransformer.load(path)
+    return RPointHopTransformer.pretrained() if path is None else RPointHopTransformer.load(path)
 
 
 # --------------------------------------------------------------------------- commands
@@ -87,30 +87,178 @@ def cmd_describe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _voxel(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"voxel size must be positive, got {text!r}")
+    return value
+
+
+def _read_matrix(path: str) -> np.ndarray:
+    try:
+        matrix = np.loadtxt(path, ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise CommandError(f"cannot read a 4x4 matrix from {path}: {exc}") from exc
+    if matrix.shape != (4, 4):
+        raise CommandError(f"{path} holds a {matrix.shape} matrix, not 4x4")
+    return matrix
+
+
+def cmd_register(args: argparse.Namespace) -> int:
+    from .fpfh import FPFHTransformer
+    from .io import read_cloud, write_cloud
+    from .registration import register
+
+    source = read_cloud(args.source)
+    target = read_cloud(args.target)
+    if args.descriptor == "fpfh":
+        if args.model:
+            raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
+        descriptor = FPFHTransformer(radius="auto", normal_radius="auto")
+    else:
+        descriptor = _load_model(args.model) if args.model else None
+    init = _read_matrix(args.init) if args.init else None
+    result = register(
+        source,
+        target,
+        descriptor,
+        global_method=None if args.global_method == "none" else args.global_method,
+        refine=None if args.refine == "none" else args.refine,
+        voxel_size=args.voxel_size,
+        n_global_points=args.n_global_points,
+        init=init,
+        seed=args.seed,
+    )
+    summary = result.as_dict()
+    summary.update({"source": args.source, "target": args.target})
+    if args.output:
+        aligned = source.transform(result.transformation)  # source is our own copy
+        write_cloud(args.output, aligned)
+        summary["aligned_cloud"] = args.output
+    if args.transform:
+        if args.transform.lower().endswith(".json"):
+            Path(args.transform).write_text(json.dumps(summary, indent=2))
+        else:
+            np.savetxt(args.transform, result.transformation, fmt="%.10f")
+        summary["transform_file"] = args.transform
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(np.array2string(result.transformation, precision=8, suppress_small=True))
+        steps = ", ".join(f"{s.name} {s.seconds:.2f}s" for s in result.steps)
+        print(
+            f"fitness {result.fitness:.3f}, inlier RMSE {result.inlier_rmse:.6g}, "
+            f"voxel {result.voxel_size:.6g} ({steps})"
+        )
+    return 0
+
+
+def cmd_benchmark(args: argparse.Namespace) -> int:
+    from .benchmark.methods import METHODS
+    from .benchmark.runner import (
+        MODELNET40_PROTOCOLS,
+        run_3dmatch,
+        run_bunny,
+        run_modelnet40,
+        write_report,
+    )
+
+    methods = args.methods.split(",") if args.methods else list(METHODS)
+    model = _load_model(args.model)
+    common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
+    if args.dataset == "modelnet40":
+        protocols = args.protocol or list(MODELNET40_PROTOCOLS)
+        results = run_modelnet40(protocols, methods, max_shapes=args.max_shapes, **common)
+    elif args.dataset == "bunny":
+        results = run_bunny(args.protocol or ["scans", "paper"], methods, **common)
+    else:
+        if args.protocol:
+            raise CommandError("3dmatch has no protocols to choose")
+        results = run_3dmatch(methods, **common)
+    paths = write_report(results, args.output)
+    print(Path(paths[1]).read_text())
+    print("written: " + ", ".join(paths))
+    return 0
+
+
+def _sample_pair(args: argparse.Namespace):
+    """The demo's pair: the user's files, else two real Bunny scans when the data is
+    around, else two samples of a synthetic object rotated apart."""
+    from scipy.spatial.transform import Rotation
+
+    from .datasets import make_object
+    from .io import read_cloud
+
+    if args.source or args.target:
+        if not (args.source and args.target):
+            raise CommandError("give both --source and --target, or neither")
+        return (
+            read_cloud(args.source),
+            read_cloud(args.target),
+            None,
+            (f"{args.source} -> {args.target}"),
+        )
+    if not args.synthetic:
+        from .datasets.bunny import load_bunny
+
+        try:
+            scans = load_bunny(("bun000", "bun045"), args.data)
+        except FileNotFoundError:
+            pass
+        else:
+            truth = scans["bun045"].relative_pose(scans["bun000"])
+            return (
+                scans["bun045"].points,
+                scans["bun000"].points,
+                truth,
+                "Stanford Bunny range scans bun045 -> bun000 (real data, bun.conf ground truth)",
+            )
+    target = make_object(2048, shape_seed=7, sample_seed=1)
+    rotation = Rotation.random(random_state=3).as_matrix()
+    shift = np.array([0.4, -0.3, 0.2])
+    source = make_object(2048, shape_seed=7, sample_seed=2) @ rotation.T + shift
+    truth = np.eye(4)
+    truth[:3, :3], truth[:3, 3] = rotation.T, -rotation.T @ shift
+    return source, target, truth, "synthetic object: two different samples, rotated apart"
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
-    from .datasets import make_blob
-    from .rpointhop import RPointHopTransformer
+    from .io import write_cloud
+    from .open3d_interop import to_point_cloud
+    from .plotting import save_registration_png
+    from .registration import register
+    from .transforms import rotation_error_deg, translation_error
 
     out = Path(args.output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    train = [make_blob(1024, shape_seed=s) for s in range(16)]
-    start = time.perf_counter()
-    model = RPointHopTransformer(random_state=0).fit(train)
-    fit_s = time.perf_counter() - start
-    cloud = make_blob(1024, shape_seed=100)
-    start = time.perf_counter()
-    desc = model.transform(cloud)
-    describe_s = time.perf_counter() - start
-    model.save(out / "demo_model.npz")
-    np.save(out / "demo_descriptors.npy", np.ascontiguousarray(desc))
+    source, target, truth, name = _sample_pair(args)
+    result = register(source, target)  # the pretrained R-PointHop model, RANSAC, then ICP
+    write_cloud(out / "aligned.ply", to_point_cloud(source).transform(result.transformation))
+    np.savetxt(out / "transform.txt", result.transformation, fmt="%.10f")
+    picture = out / "before_after.png"
+    save_registration_png(
+        source, target, result.transformation, picture,
+        title=f"{name}\nR-PointHop (pretrained) + RANSAC + ICP, {result.seconds:.2f} s",
+    )  # fmt: skip
     summary = {
-        "fit_clouds": len(train),
-        "fit_seconds": round(fit_s, 3),
-        "points": len(cloud),
-        "descriptor_dim": int(desc.shape[1]),
-        "describe_seconds": round(describe_s, 4),
-        "outputs": [str(out / "demo_model.npz"), str(out / "demo_descriptors.npy")],
+        "pair": name,
+        "source_points": len(to_point_cloud(source).points),
+        "target_points": len(to_point_cloud(target).points),
+        "transformation": result.transformation.round(8).tolist(),
+        "fitness": round(result.fitness, 4),
+        "inlier_rmse": result.inlier_rmse,
+        "seconds": round(result.seconds, 3),
+        "steps": {s.name: round(s.seconds, 3) for s in result.steps},
+        "outputs": [str(out / "aligned.ply"), str(out / "transform.txt"), str(picture)],
     }
+    if truth is not None:
+        summary["rotation_error_deg"] = round(rotation_error_deg(result.transformation, truth), 4)
+        summary["translation_error"] = translation_error(result.transformation, truth)
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -124,9 +272,69 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("demo", help="fit a model on sample clouds and describe one")
+    p = sub.add_parser(
+        "demo",
+        help="register a sample pair with the pretrained model; write a before/after PNG",
+        description="Register a sample pair with the pretrained R-PointHop model (RANSAC, "
+        "then ICP) and write aligned.ply, transform.txt and before_after.png. The pair is "
+        "--source/--target if given, else two Stanford Bunny scans when the data folder "
+        "exists, else a synthetic object.",
+    )
     p.add_argument("--output-dir", default="demo_output", help="where results go")
+    p.add_argument("--source", help="your own source cloud")
+    p.add_argument("--target", help="your own target cloud")
+    p.add_argument("--data", help="data folder (default: $O3D_RPOINTHOP_DATA or ../shared/data)")
+    p.add_argument("--synthetic", action="store_true", help="use the synthetic pair")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser(
+        "register",
+        help="align SOURCE to TARGET: global estimate from descriptors, then ICP",
+        description="Align SOURCE to TARGET and print the 4x4 transformation that maps the "
+        "source into the target frame. Clouds: any format Open3D reads (.ply, .pcd, .xyz, "
+        "...) or .npy/.npz/.txt/.csv.",
+    )
+    p.add_argument("source")
+    p.add_argument("target")
+    p.add_argument("--descriptor", choices=["rpointhop", "fpfh"], default="rpointhop")
+    p.add_argument("--model", help="R-PointHop model file (default: the pretrained model)")
+    p.add_argument(
+        "--global", dest="global_method", choices=["ransac", "fgr", "svd", "none"],
+        default="ransac", help="global estimate (default: ransac)",
+    )  # fmt: skip
+    p.add_argument(
+        "--refine",
+        choices=["point_to_plane", "point_to_point", "generalized", "multiscale", "none"],
+        default="point_to_plane",
+        help="ICP refinement (default: point_to_plane)",
+    )
+    p.add_argument("--voxel-size", type=_voxel, default="auto", help="'auto' or a length")
+    p.add_argument("--n-global-points", type=int, default=2048)
+    p.add_argument("--init", help="text file with a 4x4 start transformation (for ICP alone)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", help="write the aligned source cloud here")
+    p.add_argument("--transform", help="write the transformation here (.txt: 4x4; .json: all)")
+    p.add_argument("--json", action="store_true", help="print the full result as JSON")
+    p.set_defaults(func=cmd_register)
+
+    p = sub.add_parser(
+        "benchmark",
+        help="registration benchmarks against the paper and FPFH (JSON, markdown, PNG)",
+        description="Run every method on the dataset's protocols in one run and write "
+        "<output>/<dataset>.json, .md and .png. ModelNet40 protocols: paper, "
+        "paper-unseen-classes, paper-noise, paper-partial, angle-sweep, resampled, "
+        "resampled-noise, resampled-partial; bunny: scans, paper.",
+    )
+    p.add_argument("dataset", choices=["modelnet40", "bunny", "3dmatch"])
+    p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
+    p.add_argument("--methods", help="comma-separated methods (default: all)")
+    p.add_argument("--data", help="data folder (default: $O3D_RPOINTHOP_DATA or ../shared/data)")
+    p.add_argument("--output", default="benchmark_results", help="where results go")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-shapes", type=int, help="ModelNet40: use only the first N test shapes")
+    p.add_argument("--model", help="R-PointHop model file (default: the pretrained model)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=cmd_benchmark)
 
     p = sub.add_parser("fit", help="fit an R-PointHop model on point cloud files")
     p.add_argument("clouds", nargs="+", help="training clouds (.ply, .pcd, .xyz, .npy, ...)")
@@ -143,7 +351,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("describe", help="write one descriptor per point of a cloud (.npy)")
     p.add_argument("cloud")
     p.add_argument("-o", "--output", required=True, help="descriptor file to write (.npy)")
-    p.add_argument("--model", required=True, help="model file written by 'fit'")
+    p.add_argument("--model", help="model file written by 'fit' (default: the pretrained model)")
     p.set_defaults(func=cmd_describe)
     return parser
 

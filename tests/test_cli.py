@@ -106,3 +106,86 @@ def test_read_cloud_formats(tmp_path):
     pcd.estimate_normals()
     write_cloud(tmp_path / "n.ply", pcd)
     assert read_cloud(tmp_path / "n.ply").has_normals()
+
+
+# ----------------------------------------------------------------------------- register
+def _pair(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    target = make_object(700, shape_seed=31)
+    rot = Rotation.random(random_state=2).as_matrix()
+    source = target @ rot.T + [0.2, -0.1, 0.3]
+    truth = np.eye(4)
+    truth[:3, :3] = rot.T
+    truth[:3, 3] = -rot.T @ [0.2, -0.1, 0.3]
+    return _write(tmp_path / "src.ply", source), _write(tmp_path / "tgt.pcd", target), truth
+
+
+def test_register_writes_aligned_cloud_and_transforms(tmp_path, capsys):
+    src, tgt, truth = _pair(tmp_path)
+    out = tmp_path / "aligned.ply"
+    code = main([
+        "register", src, tgt, "--refine", "point_to_plane", "-o", str(out),
+        "--transform", str(tmp_path / "T.txt"), "--json",
+    ])  # fmt: skip
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(np.array(summary["transformation"]), truth, atol=1e-6)
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "T.txt"), truth, atol=1e-6)
+    aligned = np.asarray(read_cloud(out).points)
+    np.testing.assert_allclose(
+        np.sort(aligned, axis=0), np.sort(np.asarray(read_cloud(tgt).points), axis=0), atol=1e-5
+    )
+    assert [s["name"] for s in summary["steps"]] == ["global", "refine"]
+
+    assert main(["register", src, tgt, "--transform", str(tmp_path / "T.json")]) == 0
+    text = capsys.readouterr().out
+    assert "fitness" in text
+    saved = json.loads((tmp_path / "T.json").read_text())
+    np.testing.assert_allclose(np.array(saved["transformation"]), truth, atol=1e-6)
+
+
+def test_register_options(tmp_path, capsys):
+    src, tgt, truth = _pair(tmp_path)
+    for extra in (
+        ["--descriptor", "fpfh"],
+        ["--global", "svd", "--refine", "none"],
+        ["--global", "fgr", "--refine", "multiscale", "--voxel-size", "0.04"],
+    ):
+        assert main(["register", src, tgt, "--json", *extra]) == 0, extra
+        result = json.loads(capsys.readouterr().out)
+        estimate = np.array(result["transformation"])
+        assert np.abs(estimate - truth).max() < 0.02, extra
+    init = tmp_path / "init.txt"
+    np.savetxt(init, truth)
+    assert main(["register", src, tgt, "--global", "none", "--init", str(init), "--json"]) == 0
+    assert (
+        np.abs(np.array(json.loads(capsys.readouterr().out)["transformation"]) - truth).max() < 1e-6
+    )
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--descriptor", "fpfh", "--model", "m.npz"], "--model applies to the rpointhop"),
+        (["--init", "bad.txt"], "not 4x4"),
+        (["--model", "missing.npz"], "no such model file"),
+    ],
+)
+def test_register_errors(tmp_path, monkeypatch, capsys, extra, message):
+    src, tgt, _ = _pair(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    np.savetxt(tmp_path / "bad.txt", np.eye(3))
+    assert main(["register", src, tgt, *extra]) == 1
+    assert message in capsys.readouterr().err
+
+
+def test_register_usage_errors():
+    for args in (
+        ["register", "a.ply"],
+        ["register", "a", "b", "--voxel-size", "-1"],
+        ["register", "a", "b", "--global", "teaser"],
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(args)
+        assert exc.value.code == 2

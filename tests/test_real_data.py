@@ -45,3 +45,29 @@ def test_rpointhop_beats_fpfh_on_resampled_modelnet_pairs(modelnet):
             scores[name].append(np.mean(error < 0.05))
     rph, fp = np.mean(scores["rph"]), np.mean(scores["fpfh"])
     assert rph > 0.10 and rph > 1.5 * fp, (rph, fp)
+
+
+@pytest.mark.parametrize("scan", ["bun045", "bun315"])
+def test_bunny_scans_register_within_2deg_2mm(shared_data, scan):
+    from o3d_rpointhop import register
+    from o3d_rpointhop.datasets.bunny import load_bunny
+    from o3d_rpointhop.transforms import rotation_error_deg, translation_error
+
+    scans = load_bunny(("bun000", scan), shared_data)
+    truth = scans[scan].relative_pose(scans["bun000"])
+    result = register(scans[scan].points, scans["bun000"].points)  # pretrained model
+    assert rotation_error_deg(result.transformation, truth) < 2.0
+    assert translation_error(result.transformation, truth) < 0.002
+
+
+def test_bun_conf_poses_align_the_scans(shared_data):
+    """The loader's pose convention: bun045 mapped by its pose lies on bun000."""
+    from scipy.spatial import cKDTree
+
+    from o3d_rpointhop.datasets.bunny import load_bunny
+    from o3d_rpointhop.transforms import apply_transform
+
+    scans = load_bunny(("bun000", "bun045"), shared_data)
+    moved = apply_transform(scans["bun045"].points, scans["bun045"].relative_pose(scans["bun000"]))
+    dist = cKDTree(scans["bun000"].points).query(moved)[0]
+    assert np.median(dist[dist < 0.001]) < 0.0005 and np.mean(dist < 0.001) > 0.85

@@ -1,0 +1,191 @@
+"""Point correspondences from descriptors: nearest neighbour, ratio test, mutual filter."""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+
+__all__ = ["Correspondences", "find_correspondences", "nearest_descriptors"]
+
+# Rows of the distance matrix computed at a time (bounded memory for large clouds).
+_CHUNK_ELEMENTS = 2**23
+
+
+@dataclass
+class Correspondences:
+    """Matched point pairs.
+
+    Attributes
+    ----------
+    pairs : ndarray of shape (m, 2), int64
+        ``(source index, target index)`` per match: the layout of Open3D's
+        ``CorrespondenceSet``.
+    distances : ndarray of shape (m,)
+        Descriptor distance of each match.
+    ratios : ndarray of shape (m,)
+        Distance to the nearest target descriptor over the distance to the second
+        nearest (the ratio test's statistic; smaller is more distinctive).
+    """
+
+    pairs: np.ndarray
+    distances: np.ndarray
+    ratios: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def __array__(self, dtype=None, copy=None):
+        return self.pairs if dtype is None else self.pairs.astype(dtype)
+
+    def to_open3d(self) -> o3d.utility.Vector2iVector:
+        """The pairs as Open3D's ``Vector2iVector`` (a ``CorrespondenceSet``)."""
+        return o3d.utility.Vector2iVector(self.pairs.astype(np.int32))
+
+
+def _as_features(x, name: str) -> np.ndarray:
+    arr = np.asarray(x.data.T if isinstance(x, o3d.pipelines.registration.Feature) else x)
+    if arr.ndim != 2 or arr.shape[0] == 0:
+        raise ValueError(
+            f"{name} must be a non-empty (n_points, n_features) array, got {arr.shape}"
+        )
+    if not np.issubdtype(arr.dtype, np.floating):
+        arr = arr.astype(np.float64)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} holds NaN or infinite values")
+    return arr
+
+
+def nearest_descriptors(
+    queries: np.ndarray, references: np.ndarray, k: int = 2
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ``k`` nearest reference rows (Euclidean) of every query row.
+
+    Candidates come from blocks of the distance matrix computed with matrix products,
+    which for descriptors of hundreds of dimensions is far faster than a k-d tree; the
+    few best candidates are then re-measured directly in float64, so rounding in the
+    fast pass (``|q|^2 + |r|^2 - 2 q.r`` cancels badly for near-equal rows) cannot
+    reorder near-ties.
+
+    Returns
+    -------
+    indices : ndarray of shape (n_queries, k)
+    distances : ndarray of shape (n_queries, k)
+        Nearest first.
+    """
+    dtype = np.result_type(np.asarray(queries).dtype, np.asarray(references).dtype, np.float32)
+    # Row-major copies: the candidate gathers below read whole rows.
+    fast_q = np.ascontiguousarray(queries, dtype=dtype)
+    fast_r = np.ascontiguousarray(references, dtype=dtype)
+    k = min(k, len(fast_r))
+    n_candidates = min(len(fast_r), k + 2)
+    ref_sq = np.einsum("ij,ij->i", fast_r, fast_r)
+    rows = max(1, _CHUNK_ELEMENTS // max(1, len(fast_r) + n_candidates * fast_q.shape[1]))
+    indices = np.empty((len(fast_q), k), dtype=np.int64)
+    distances = np.empty((len(fast_q), k), dtype=np.float64)
+    for start in range(0, len(fast_q), rows):
+        stop = min(len(fast_q), start + rows)
+        approx = ref_sq[None, :] - 2.0 * (fast_q[start:stop] @ fast_r.T)  # + |q|^2
+        if n_candidates < approx.shape[1]:
+            cand = np.argpartition(approx, n_candidates - 1, axis=1)[:, :n_candidates]
+        else:
+            cand = np.broadcast_to(np.arange(approx.shape[1]), approx.shape)
+        # Differences of near-equal numbers are exact in floating point; the squares are
+        # summed in float64.
+        diff = fast_r[cand] - fast_q[start:stop, None, :]
+        exact = np.sqrt(np.einsum("qcd,qcd->qc", diff, diff, dtype=np.float64))
+        order = np.argsort(exact, axis=1, kind="stable")[:, :k]
+        indices[start:stop] = np.take_along_axis(cand, order, axis=1)
+        distances[start:stop] = np.take_along_axis(exact, order, axis=1)
+    return indices, distances
+
+
+def _check_count(value, name: str) -> None:
+    if value is not None and not (
+        isinstance(value, numbers.Integral) and not isinstance(value, bool) and value >= 1
+    ):
+        raise ValueError(f"{name} must be None or a positive int, got {value!r}")
+
+
+def _check_positive(value, name: str) -> None:
+    if value is not None and not (isinstance(value, numbers.Real) and value > 0):
+        raise ValueError(f"{name} must be None or a positive number, got {value!r}")
+
+
+def find_correspondences(
+    source_features,
+    target_features,
+    *,
+    mutual: bool = False,
+    max_distance: float | None = None,
+    max_ratio: float | None = None,
+    top_k: int | None = None,
+    top_k_ratio: int | None = None,
+) -> Correspondences:
+    """Match every source point to the target point with the nearest descriptor, then filter.
+
+    The filters follow R-PointHop (Sec. III-B): keep the ``top_k`` matches with the
+    smallest descriptor distance (the paper's M1), then the ``top_k_ratio`` of those with
+    the smallest ratio between the nearest and the second nearest distance (M2); or, by
+    threshold, matches with distance at most ``max_distance`` (t1) and ratio at most
+    ``max_ratio`` (t2). ``mutual`` keeps only pairs that are each other's nearest.
+
+    Parameters
+    ----------
+    source_features, target_features : array-like of shape (n, d) or open3d Feature
+        Descriptors, one row per point (an Open3D ``Feature`` is read as ``data.T``).
+    mutual : bool, default=False
+    max_distance, max_ratio : float, default=None
+    top_k, top_k_ratio : int, default=None
+
+    Returns
+    -------
+    Correspondences
+        Sorted by source index.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from o3d_rpointhop import find_correspondences
+    >>> a = np.eye(4)
+    >>> find_correspondences(a, a[::-1]).pairs[:, 1].tolist()
+    [3, 2, 1, 0]
+    """
+    src = _as_features(source_features, "source_features")
+    tgt = _as_features(target_features, "target_features")
+    if src.shape[1] != tgt.shape[1]:
+        raise ValueError(
+            f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
+        )
+    _check_count(top_k, "top_k")
+    _check_count(top_k_ratio, "top_k_ratio")
+    _check_positive(max_distance, "max_distance")
+    _check_positive(max_ratio, "max_ratio")
+
+    idx, dist = nearest_descriptors(src, tgt, k=2)
+    nearest = idx[:, 0]
+    d1 = dist[:, 0]
+    d2 = dist[:, 1] if dist.shape[1] > 1 else np.full_like(d1, np.inf)
+    ratio = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
+    ratio[(d2 == 0) & (d1 == 0)] = 1.0  # two identical nearest descriptors: ambiguous
+    keep = np.ones(len(src), dtype=bool)
+    if mutual:
+        back, _ = nearest_descriptors(tgt, src, k=1)
+        keep &= back[nearest, 0] == np.arange(len(src))
+    if max_distance is not None:
+        keep &= d1 <= max_distance
+    if max_ratio is not None:
+        keep &= ratio <= max_ratio
+    chosen = np.flatnonzero(keep)
+    if top_k is not None and chosen.size > top_k:
+        chosen = chosen[np.argsort(d1[chosen], kind="stable")[:top_k]]
+    if top_k_ratio is not None and chosen.size > top_k_ratio:
+        chosen = chosen[np.argsort(ratio[chosen], kind="stable")[:top_k_ratio]]
+    chosen = np.sort(chosen)
+    return Correspondences(
+        pairs=np.c_[chosen, nearest[chosen]].astype(np.int64),
+        distances=d1[chosen],
+        ratios=ratio[chosen],
+    )

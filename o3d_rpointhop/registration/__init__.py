@@ -1,0 +1,31 @@
+"""Registration: global estimates from descriptors, then ICP refinement chains."""
+
+from .context import RegistrationContext
+from .pipeline import RegistrationPipeline, RegistrationResult, register
+from .steps import (
+    FGRGlobal,
+    GeneralizedICP,
+    MultiScaleICP,
+    PointToPlaneICP,
+    PointToPointICP,
+    RANSACGlobal,
+    RegistrationStep,
+    StepResult,
+    SVDGlobal,
+)
+
+__all__ = [
+    "FGRGlobal",
+    "GeneralizedICP",
+    "MultiScaleICP",
+    "PointToPlaneICP",
+    "PointToPointICP",
+    "RANSACGlobal",
+    "RegistrationContext",
+    "RegistrationPipeline",
+    "RegistrationResult",
+    "RegistrationStep",
+    "SVDGlobal",
+    "StepResult",
+    "register",
+]

@@ -1,0 +1,91 @@
+"""Rigid transforms: the SVD (Kabsch) fit, applying them, and measuring their error."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "rigid_transform",
+    "apply_transform",
+    "rotation_error_deg",
+    "translation_error",
+    "euler_angles_deg",
+]
+
+
+def rigid_transform(
+    source: np.ndarray, target: np.ndarray, weights: np.ndarray | None = None
+) -> np.ndarray:
+    """Least-squares rotation and translation taking ``source`` points onto ``target``.
+
+    The closed form of the R-PointHop paper (Sec. III-C, after Schoenemann 1966): centre
+    both sets on their (weighted) means, take the SVD of the cross-covariance and fix a
+    reflection, should the SVD return one, by flipping the last singular direction.
+
+    Parameters
+    ----------
+    source, target : ndarray of shape (n, 3)
+        Matched points, row ``i`` of one with row ``i`` of the other.
+    weights : ndarray of shape (n,), default=None
+
+    Returns
+    -------
+    transformation : ndarray of shape (4, 4)
+        ``T`` with ``target ~ source @ T[:3, :3].T + T[:3, 3]``.
+
+    Raises
+    ------
+    ValueError
+        For mismatched shapes, fewer than 3 pairs, or pairs that do not fix a rotation
+        (all on one line).
+    """
+    source = np.asarray(source, dtype=np.float64)
+    target = np.asarray(target, dtype=np.float64)
+    if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
+        raise ValueError(
+            f"source and target must be matching (n, 3) arrays, got {source.shape} and "
+            f"{target.shape}"
+        )
+    if len(source) < 3:
+        raise ValueError(f"a rigid transform needs at least 3 point pairs, got {len(source)}")
+    w = np.ones(len(source)) if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != (len(source),) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError("weights must be non-negative, one per pair, and not all zero")
+    w = w / w.sum()
+    mu_s = w @ source
+    mu_t = w @ target
+    cov = (source - mu_s).T @ ((target - mu_t) * w[:, None])
+    u, s, vt = np.linalg.svd(cov)
+    if s[1] <= 1e-12 * max(s[0], 1e-300):
+        raise ValueError("the point pairs are collinear (or coincide): no unique rotation")
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    out = np.eye(4)
+    out[:3, :3] = rotation
+    out[:3, 3] = mu_t - rotation @ mu_s
+    return out
+
+
+def apply_transform(points: np.ndarray, transformation: np.ndarray) -> np.ndarray:
+    """``points @ R.T + t`` for a 4x4 ``transformation``."""
+    t = np.asarray(transformation, dtype=np.float64)
+    return np.asarray(points, dtype=np.float64) @ t[:3, :3].T + t[:3, 3]
+
+
+def rotation_error_deg(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Angle of the rotation ``R_truth^T R_estimate``, in degrees (isotropic error)."""
+    rel = np.asarray(truth)[:3, :3].T @ np.asarray(estimate)[:3, :3]
+    cos = np.clip((np.trace(rel) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.degrees(np.arccos(cos)))
+
+
+def translation_error(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Euclidean distance between the two translations."""
+    return float(np.linalg.norm(np.asarray(estimate)[:3, 3] - np.asarray(truth)[:3, 3]))
+
+
+def euler_angles_deg(transformation: np.ndarray) -> np.ndarray:
+    """The rotation as ``xyz`` Euler angles in degrees (the ModelNet40 protocols' unit)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(np.asarray(transformation)[:3, :3]).as_euler("xyz", degrees=True)
