@@ -224,9 +224,8 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
     frames, local_all = local_reference_frames(offsets_all, k_lrf, towards)
     length = cloud_scale(nn_sq[:, :k_lrf], config.scale)
 
-    hop1_attributes = np.empty((0, 24))
-    poolings: list[OctantPooling] = []
-    for h in range(n_hops):
+    def neighbourhood(h: int) -> tuple[np.ndarray, np.ndarray]:
+        """Hop ``h``'s neighbours (rows of its source sample) and their octants."""
         k = config.n_neighbors[h]
         src, qry = sources[h], queries[h]
         if len(src) == n:
@@ -238,9 +237,13 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
             nb = drop_self(idx, sq, k)
             offsets = np.take(planes, src[nb], axis=1) - planes[:, qry, None]
             local = project(offsets, frames[qry])
-        octant = octant_index(local)
-        if h == 0:
-            hop1_attributes = coordinate_octant_means(local / length, octant)
-        else:
-            poolings.append(OctantPooling(octant, nb, len(src)))
+        return nb, local
+
+    def pooling(h: int) -> OctantPooling:
+        nb, local = neighbourhood(h)
+        return OctantPooling(octant_index(local), nb, len(sources[h]))
+
+    _, local = neighbourhood(0)
+    hop1_attributes = coordinate_octant_means(local / length, octant_index(local))
+    poolings = [pooling(h) for h in range(1, n_hops)]
     return CloudGeometry(n_points=n, hop1_attributes=hop1_attributes, poolings=poolings)

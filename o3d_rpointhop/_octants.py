@@ -6,10 +6,13 @@ nothing is ever NaN and adding a constant to every value adds it to every octant
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["N_OCTANTS", "octant_index", "coordinate_octant_means", "OctantPooling"]
+__all__ = ["N_OCTANTS", "octant_index", "coordinate_octant_means", "OctantPooling", "executor"]
 
 N_OCTANTS = 8
 DTYPE = np.float32  # features from hop 2 on (see RPointHopTransformer.transform)
@@ -132,24 +135,76 @@ class OctantPooling:
     def nbytes(self) -> int:
         return sum(a.nbytes for a in self._arrays) + self.fill_weights.nbytes + self.empty.nbytes
 
-    def __call__(self, features: np.ndarray) -> np.ndarray:
-        """Pool features ``(n_channels, n_sources)`` into ``(n_channels, 8, q)``.
+    def _pool_block(self, block, sources_major: np.ndarray) -> np.ndarray:
+        """Octant means of one block of queries: ``(n_channels, 8, stop - start)``."""
+        start, stop, matrix = block
+        n_channels = sources_major.shape[1]
+        pooled = (matrix @ sources_major).reshape(stop - start, N_OCTANTS, n_channels)
+        empty = self.empty[start:stop]
+        if empty.any():
+            # Empty octants take the neighbourhood mean: the count-weighted mean of the
+            # octant means (a batched product over queries, so every query's sum runs the
+            # same way wherever it sits).
+            whole = np.matmul(self.fill_weights[start:stop, None, :], pooled)[:, 0]
+            qi, oi = np.nonzero(empty)
+            pooled[qi, oi] = whole[qi]
+        return np.ascontiguousarray(pooled.transpose(2, 1, 0))
 
-        Each block of queries is pooled, its empty octants filled, and transposed into
-        place while it is small enough to stay in the CPU cache.
+    def map_blocks(self, features: np.ndarray, consume) -> None:
+        """Pool block by block on a few threads and hand each block to ``consume``.
+
+        ``consume(start, stop, pooled)`` gets the octant means ``(n_channels, 8,
+        stop - start)`` of queries ``start:stop``; it typically transforms them and
+        writes the result into its own slice of an output array. Blocks are independent
+        and the heavy numpy and scipy calls release the GIL, so two threads take the last
+        hop from 9 ms to 5 ms on two cores; the result does not depend on the order in
+        which blocks finish.
+
+        Parameters
+        ----------
+        features : ndarray of shape (n_channels, n_sources)
+        consume : callable
         """
-        n_channels = features.shape[0]
         sources_major = np.ascontiguousarray(features.T)  # (n_sources, c)
-        out = np.empty((n_channels, N_OCTANTS, self.n_queries), dtype=features.dtype)
-        for start, stop, matrix in self.blocks:
-            pooled = (matrix @ sources_major).reshape(stop - start, N_OCTANTS, n_channels)
-            empty = self.empty[start:stop]
-            if empty.any():
-                # Empty octants take the neighbourhood mean: the count-weighted mean of
-                # the octant means (a batched product over queries, so every query's
-                # sum runs the same way wherever it sits).
-                whole = np.matmul(self.fill_weights[start:stop, None, :], pooled)[:, 0]
-                qi, oi = np.nonzero(empty)
-                pooled[qi, oi] = whole[qi]
-            out[:, :, start:stop] = pooled.transpose(2, 1, 0)
+
+        def run(block):
+            consume(block[0], block[1], self._pool_block(block, sources_major))
+
+        if len(self.blocks) == 1:
+            run(self.blocks[0])
+            return
+        for future in [executor().submit(run, block) for block in self.blocks]:
+            future.result()
+
+    def __call__(self, features: np.ndarray) -> np.ndarray:
+        """Pool features ``(n_channels, n_sources)`` into ``(n_channels, 8, q)``."""
+        out = np.empty((features.shape[0], N_OCTANTS, self.n_queries), dtype=features.dtype)
+
+        def store(start, stop, pooled):
+            out[:, :, start:stop] = pooled
+
+        self.map_blocks(features, store)
         return out
+
+
+_EXECUTOR: ThreadPoolExecutor | None = None
+
+
+def executor() -> ThreadPoolExecutor:
+    """The threads that pool blocks (created on first use, one per core up to four)."""
+    global _EXECUTOR
+    if _EXECUTOR is None:
+        _EXECUTOR = ThreadPoolExecutor(
+            max_workers=max(1, min(4, os.cpu_count() or 1)), thread_name_prefix="rpointhop"
+        )
+    return _EXECUTOR
+
+
+def _forget_executor() -> None:
+    # A forked child inherits the executor object but not its threads: start afresh.
+    global _EXECUTOR
+    _EXECUTOR = None
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_executor)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_points", "as_cloud_list", "is_open3d_cloud"]
+__all__ = ["as_points", "as_cloud_list", "is_open3d_cloud", "describe_each"]
 
 
 def is_open3d_cloud(obj: Any) -> bool:
@@ -135,3 +135,24 @@ def as_cloud_list(X: Any, name: str = "X") -> tuple[list[np.ndarray], str]:
             raise ValueError(f"{name} is an empty batch of point clouds")
         return [as_points(c, f"{name}[{i}]") for i, c in enumerate(arr)], "batch"
     return [as_points(arr, name)], "single"
+
+
+def describe_each(describe, clouds: list, kind: str, n_jobs: int | None, *per_cloud: list):
+    """Apply ``describe(cloud, *extras)`` to every cloud and answer in the input's form.
+
+    One cloud runs in this process; several run in ``n_jobs`` joblib processes. The
+    result is one array for ``kind="single"``, a stacked 3-D array for ``"batch"`` and a
+    list for ``"list"`` (see :func:`as_cloud_list`).
+    """
+    from joblib import Parallel, delayed
+
+    args = list(zip(clouds, *per_cloud, strict=True))
+    if len(args) == 1:
+        out = [describe(*args[0])]
+    else:
+        out = Parallel(n_jobs=n_jobs)(delayed(describe)(*a) for a in args)
+    if kind == "single":
+        return out[0]
+    if kind == "batch":
+        return np.stack(out)
+    return out

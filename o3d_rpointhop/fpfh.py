@@ -7,10 +7,9 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
-from joblib import Parallel, delayed
 from sklearn.base import BaseEstimator, ClassNamePrefixFeaturesOutMixin, TransformerMixin
 
-from ._validation import as_cloud_list, is_open3d_cloud
+from ._validation import as_cloud_list, describe_each, is_open3d_cloud
 
 __all__ = ["FPFHTransformer"]
 
@@ -182,17 +181,7 @@ class FPFHTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEst
         self._check_params()
         clouds, kind = as_cloud_list(X)
         normals = self._normals_of(X, len(clouds))
-        if len(clouds) == 1:
-            out = [self._describe(clouds[0], normals[0])]
-        else:
-            out = Parallel(n_jobs=self.n_jobs)(
-                delayed(self._describe)(c, n) for c, n in zip(clouds, normals, strict=True)
-            )
-        if kind == "single":
-            return out[0]
-        if kind == "batch":
-            return np.stack(out)
-        return out
+        return describe_each(self._describe, clouds, kind, self.n_jobs, normals)
 
     @property
     def _n_features_out(self) -> int:

@@ -56,11 +56,28 @@ def test_fit_passes_hop_parameters(tmp_path):
     assert model.lrf_neighbors == 20 and model.energy_threshold == 0.01
 
 
-def test_demo_writes_its_outputs(tmp_path, capsys):
-    assert main(["demo", "--output-dir", str(tmp_path / "out")]) == 0
+def test_demo_registers_the_synthetic_pair_and_draws_it(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["demo", "--synthetic", "--output-dir", str(out)]) == 0
     summary = json.loads(capsys.readouterr().out)
-    for path in summary["outputs"]:
-        assert (tmp_path / "out").joinpath(path.split("/")[-1]).is_file()
+    assert summary["pair"].startswith("synthetic")
+    assert summary["rotation_error_deg"] < 1.0 and summary["translation_error"] < 0.01
+    png = (out / "before_after.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+    np.testing.assert_allclose(
+        np.loadtxt(out / "transform.txt"), np.array(summary["transformation"]), atol=1e-7
+    )
+    assert len(read_cloud(out / "aligned.ply").points) == summary["source_points"]
+
+
+def test_demo_on_your_own_pair(tmp_path, capsys):
+    src, tgt, truth = _pair(tmp_path)
+    assert main(["demo", "--source", src, "--target", tgt, "--output-dir", str(tmp_path)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert "rotation_error_deg" not in summary  # no ground truth for a user's pair
+    np.testing.assert_allclose(np.array(summary["transformation"]), truth, atol=1e-5)
+    assert main(["demo", "--source", src]) == 1
+    assert "both --source and --target" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

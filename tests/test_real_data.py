@@ -71,3 +71,31 @@ def test_bun_conf_poses_align_the_scans(shared_data):
     moved = apply_transform(scans["bun045"].points, scans["bun045"].relative_pose(scans["bun000"]))
     dist = cKDTree(scans["bun000"].points).query(moved)[0]
     assert np.median(dist[dist < 0.001]) < 0.0005 and np.mean(dist < 0.001) > 0.85
+
+
+def test_3dmatch_loader_and_gt_convention(shared_data):
+    """gt.log's T maps fragment j into fragment i: T = inv(T_i) T_j from the .info files."""
+    from o3d_rpointhop.datasets.threedmatch import load_3dmatch_pairs
+
+    pairs = load_3dmatch_pairs(shared_data, benchmark="3DMatch")
+    assert len(pairs) >= 5 and all(p.information.shape == (6, 6) for p in pairs)
+    pair = next(p for p in pairs if (p.scene, p.i, p.j) == ("7-scenes-redkitchen", 0, 5))
+    folder = shared_data / "3dmatch" / "fragments" / "7-scenes-redkitchen"
+
+    def pose(k):
+        return np.loadtxt(folder / f"cloud_bin_{k}.info.txt", skiprows=1)
+
+    np.testing.assert_allclose(pair.truth, np.linalg.inv(pose(0)) @ pose(5), atol=1e-8)
+    assert pair.overlap == pytest.approx(0.4651)
+
+
+def test_demo_uses_the_bunny_scans_when_the_data_is_there(shared_data, tmp_path, capsys):
+    import json
+
+    from o3d_rpointhop.cli import main
+
+    assert main(["demo", "--data", str(shared_data), "--output-dir", str(tmp_path)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["pair"].startswith("Stanford Bunny")
+    assert summary["rotation_error_deg"] < 2.0 and summary["translation_error"] < 0.002
+    assert (tmp_path / "before_after.png").stat().st_size > 20_000

@@ -325,3 +325,16 @@ def test_save_needs_a_fitted_model(tmp_path):
 
     with pytest.raises(NotFittedError):
         RPointHopTransformer().save(tmp_path / "m.npz")
+
+
+def test_transform_in_a_forked_child_after_the_parent_used_its_threads(fitted, cloud):
+    """The pooling threads do not survive a fork; a forked child must start its own
+    instead of waiting forever on the parent's."""
+    import multiprocessing
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    expected = fitted.transform(cloud)  # the parent's thread pool now exists
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        result = pool.apply_async(fitted.transform, (cloud,)).get(timeout=60)
+    np.testing.assert_array_equal(result, expected)

@@ -20,6 +20,7 @@ import open3d as o3d
 from ..fpfh import FPFHTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration import register
+from ..registration.steps import repeatable_open3d
 
 __all__ = ["METHODS", "Method", "run_method"]
 
@@ -46,6 +47,11 @@ METHODS = {
         Method("icp", "point-to-point ICP alone, from the identity"),
     )
 }
+
+
+# Methods that are Open3D calls from end to end (the others go through register(), whose
+# steps already run Open3D repeatably).
+_OPEN3D_ONLY = {"fpfh-ransac", "fpfh-fgr", "fpfh-ransac-icp", "icp"}
 
 
 def _fpfh_recipe_inputs(source, target, voxel):
@@ -150,7 +156,12 @@ def run_method(
     if name not in runners:
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says it.
+    # Its RANSAC is only repeatable on one thread (see repeatable_open3d), as ours runs.
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         start = time.perf_counter()
-        transformation = runners[name]()
+        if name in _OPEN3D_ONLY:
+            with repeatable_open3d():
+                transformation = runners[name]()
+        else:
+            transformation = runners[name]()
         return transformation, time.perf_counter() - start

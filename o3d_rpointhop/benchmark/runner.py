@@ -93,8 +93,12 @@ def _check_methods(methods: Iterable[str]) -> list[str]:
     return methods
 
 
-def _evaluate(pairs, methods, model, voxel_of, seed, progress, shapes=None):
-    """Run every method on every pair; return {method: summary} and per-pair records."""
+def _evaluate(pairs, methods, model, voxel_of, seed, progress, shapes=None, tol=(5.0, 0.05)):
+    """Run every method on every pair; return {method: summary} and per-pair records.
+
+    ``shapes`` (the whole shape of each pair) enables the symmetry check; ``tol`` is the
+    success threshold (rotation in degrees, translation in the data's unit).
+    """
     summaries, records = {}, {}
     for method in methods:
         recs = []
@@ -107,7 +111,7 @@ def _evaluate(pairs, methods, model, voxel_of, seed, progress, shapes=None):
                 rec["symmetric"] = is_symmetry(estimate, pair.truth, shapes[k])
             recs.append(rec)
             progress.step(method)
-        summaries[method] = summarize(recs)
+        summaries[method] = summarize(recs, *tol)
         records[method] = recs
     return summaries, records
 
@@ -255,19 +259,7 @@ def run_bunny(
         else:
             raise ValueError(f"unknown bunny protocol {protocol!r}; choose 'scans' or 'paper'")
         bar = Progress(len(methods) * len(pairs), f"bunny {protocol}", progress)
-        summaries, records = {}, {}
-        for method in methods:
-            recs = []
-            for pair in pairs:
-                estimate, seconds = run_method(
-                    method, pair.source, pair.target, descriptor=model,
-                    voxel=resolution(pair), seed=seed,
-                )  # fmt: skip
-                recs.append({**pair_errors(estimate, pair.truth), "seconds": seconds,
-                             "pair": pair.name})  # fmt: skip
-                bar.step(method)
-            summaries[method] = summarize(recs, *tol)
-            records[method] = recs
+        summaries, records = _evaluate(pairs, methods, model, resolution, seed, bar, tol=tol)
         out["protocols"][protocol] = {
             "description": BUNNY_PROTOCOLS[protocol],
             "success": f"rotation error < {tol[0]} deg and translation error < {tol[1] * 1000} mm",
@@ -334,6 +326,7 @@ def run_3dmatch(
             moved = apply_transform(src[corr.pairs[:, 0]], pair.truth)
             inlier = np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < 0.1
             fmr[name].append({"pair": f"{pair.scene} {pair.i}-{pair.j}",
+                              "benchmark": pair.benchmark,
                               "inlier_ratio": float(inlier.mean())})  # fmt: skip
             bar.step(f"fmr {name}")
     for bench in ("3DMatch", "3DLoMatch"):
@@ -367,9 +360,10 @@ def run_3dmatch(
                 "seconds_per_pair": float(np.mean(column["seconds"])),
             }
             records[method] = recs
-        names = {f"{p.scene} {p.i}-{p.j}" for p in chosen}
         feature_recall = {
-            name: float(np.mean([r["inlier_ratio"] > 0.05 for r in rows if r["pair"] in names]))
+            name: float(
+                np.mean([r["inlier_ratio"] > 0.05 for r in rows if r["benchmark"] == bench])
+            )
             for name, rows in fmr.items()
         }
         out["protocols"][bench] = {

@@ -43,28 +43,26 @@ class FragmentPair:
     overlap: float | None = None
 
 
-def read_gt_log(path: str | os.PathLike) -> dict[tuple[int, int], np.ndarray]:
-    """``gt.log``: records of ``i j n`` then a 4x4 matrix mapping fragment j into i."""
+def _read_records(path, size: int) -> dict[tuple[int, int], np.ndarray]:
+    """Records of a header line ``i j n`` followed by a ``size`` x ``size`` matrix."""
     lines = [ln.split() for ln in Path(path).read_text().splitlines() if ln.strip()]
-    if len(lines) % 5:
-        raise ValueError(f"{path}: expected records of 5 lines, got {len(lines)} lines")
+    if len(lines) % (size + 1):
+        raise ValueError(f"{path}: expected records of {size + 1} lines, got {len(lines)} lines")
     out = {}
-    for k in range(0, len(lines), 5):
+    for k in range(0, len(lines), size + 1):
         i, j = int(lines[k][0]), int(lines[k][1])
-        out[(i, j)] = np.array([[float(v) for v in row] for row in lines[k + 1 : k + 5]])
+        out[(i, j)] = np.array([[float(v) for v in row] for row in lines[k + 1 : k + 1 + size]])
     return out
+
+
+def read_gt_log(path: str | os.PathLike) -> dict[tuple[int, int], np.ndarray]:
+    """``gt.log``: per pair ``(i, j)``, the 4x4 matrix mapping fragment j into i."""
+    return _read_records(path, 4)
 
 
 def read_gt_info(path: str | os.PathLike) -> dict[tuple[int, int], np.ndarray]:
-    """``gt.info``: records of ``i j n`` then a 6x6 information matrix."""
-    lines = [ln.split() for ln in Path(path).read_text().splitlines() if ln.strip()]
-    if len(lines) % 7:
-        raise ValueError(f"{path}: expected records of 7 lines, got {len(lines)} lines")
-    out = {}
-    for k in range(0, len(lines), 7):
-        i, j = int(lines[k][0]), int(lines[k][1])
-        out[(i, j)] = np.array([[float(v) for v in row] for row in lines[k + 1 : k + 7]])
-    return out
+    """``gt.info``: per pair ``(i, j)``, the 6x6 information matrix."""
+    return _read_records(path, 6)
 
 
 def load_3dmatch_pairs(

@@ -28,6 +28,7 @@ from .context import RegistrationContext
 
 __all__ = [
     "evaluate",
+    "repeatable_open3d",
     "StepResult",
     "RegistrationStep",
     "SVDGlobal",
@@ -99,7 +100,7 @@ def _positive_int(value: Any, name: str) -> int:
 
 
 @contextmanager
-def _repeatable_open3d():
+def repeatable_open3d():
     """Run Open3D's registration code on one thread, so a seeded run repeats bit for bit.
 
     With several threads, Open3D's RANSAC draws from one shared random generator in an
@@ -108,6 +109,9 @@ def _repeatable_open3d():
     differences). One thread costs about 10 % on RANSAC and ICP over 40k points takes
     50 ms instead of 30 ms.
     """
+    if not hasattr(o3d.utility, "set_max_threads"):  # Open3D < 0.20: no thread control
+        yield
+        return
     previous = o3d.utility.get_max_threads()
     o3d.utility.set_max_threads(1)
     try:
@@ -138,7 +142,7 @@ def evaluate(
         if which == "full"
         else (context.global_cloud("source"), context.global_cloud("target"))
     )
-    with _repeatable_open3d():
+    with repeatable_open3d():
         result = reg.evaluate_registration(source, target, threshold, transformation)
     return _from_open3d("evaluation", result, 0.0, {"threshold": threshold})
 
@@ -304,7 +308,7 @@ class RANSACGlobal(_GlobalStep):
         checkers = [reg.CorrespondenceCheckerBasedOnDistance(threshold)]
         if self.edge_length:
             checkers.insert(0, reg.CorrespondenceCheckerBasedOnEdgeLength(self.edge_length))
-        with _repeatable_open3d():
+        with repeatable_open3d():
             o3d.utility.random.seed(context.seed)
             result = reg.registration_ransac_based_on_correspondence(
                 context.global_cloud("source"),
@@ -375,7 +379,7 @@ class FGRGlobal(_GlobalStep):
             maximum_correspondence_distance=distance,
             iteration_number=_positive_int(self.iteration_number, "iteration_number"),
         )
-        with _repeatable_open3d():
+        with repeatable_open3d():
             o3d.utility.random.seed(context.seed)
             result = reg.registration_fgr_based_on_correspondence(
                 context.global_cloud("source"),
@@ -484,6 +488,23 @@ _DISTANCE_DOC = """max_correspondence_distance : float, sequence of float or Non
         error from 1.4 deg / 3 mm to 0.14 deg / 0.3 mm on the worst pair)."""
 
 
+def _estimation(method: str, kernel, epsilon: float = 1e-3):
+    """Open3D's estimation object for an ICP variant, with an optional robust kernel."""
+    if method == "point_to_point":
+        return reg.TransformationEstimationPointToPoint(False)
+    extra = [kernel] if kernel is not None else []
+    if method == "point_to_plane":
+        return reg.TransformationEstimationPointToPlane(*extra)
+    return reg.TransformationEstimationForGeneralizedICP(float(epsilon), *extra)
+
+
+def _icp(method: str, source, target, distance: float, init, estimation, criteria):
+    """One Open3D ICP run (generalized ICP has its own entry point), repeatably."""
+    run = reg.registration_generalized_icp if method == "generalized" else reg.registration_icp
+    with repeatable_open3d():
+        return run(source, target, distance, init, estimation, criteria)
+
+
 class _ICPStep(RegistrationStep):
     """Shared parameters, schedule and checks of the single-scale ICP steps."""
 
@@ -539,15 +560,9 @@ class PointToPointICP(_ICPStep):
         self.relative_rmse = relative_rmse
 
     def _solve(self, context, distance, init):
-        with _repeatable_open3d():
-            return reg.registration_icp(
-                context.source,
-                context.target,
-                distance,
-                init,
-                reg.TransformationEstimationPointToPoint(False),
-                self._criteria(),
-            )
+        estimation = _estimation(self.name, None)
+        return _icp(self.name, context.source, context.target, distance, init, estimation,
+                    self._criteria())  # fmt: skip
 
 
 class PointToPlaneICP(_ICPStep):
@@ -587,16 +602,9 @@ class PointToPlaneICP(_ICPStep):
 
     def _solve(self, context, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
-        estimation = (
-            reg.TransformationEstimationPointToPlane(kernel)
-            if kernel is not None
-            else reg.TransformationEstimationPointToPlane()
-        )
         target = context.with_normals(context.target, "target", 2.0 * context.voxel_size)
-        with _repeatable_open3d():
-            return reg.registration_icp(
-                context.source, target, distance, init, estimation, self._criteria()
-            )
+        return _icp(self.name, context.source, target, distance, init,
+                    _estimation(self.name, kernel), self._criteria())  # fmt: skip
 
 
 class GeneralizedICP(_ICPStep):
@@ -636,15 +644,9 @@ class GeneralizedICP(_ICPStep):
 
     def _solve(self, context, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
-        estimation = (
-            reg.TransformationEstimationForGeneralizedICP(float(self.epsilon), kernel)
-            if kernel is not None
-            else reg.TransformationEstimationForGeneralizedICP(float(self.epsilon))
-        )
-        with _repeatable_open3d():
-            return reg.registration_generalized_icp(
-                context.source, context.target, distance, init, estimation, self._criteria()
-            )
+        estimation = _estimation(self.name, kernel, self.epsilon)
+        return _icp(self.name, context.source, context.target, distance, init, estimation,
+                    self._criteria())  # fmt: skip
 
 
 for _cls in (PointToPointICP, PointToPlaneICP, GeneralizedICP):
@@ -712,21 +714,10 @@ class MultiScaleICP(RegistrationStep):
             tag = f"x{scale:g}"
         distance = self.distance_factor * voxel
         criteria = reg.ICPConvergenceCriteria(1e-6, 1e-6, iters)
-        kernel = _robust_kernel(self.kernel, None, distance)
-        if self.method == "generalized":
-            est = reg.TransformationEstimationForGeneralizedICP(
-                1e-3, *([kernel] if kernel is not None else [])
-            )
-            with _repeatable_open3d():
-                return reg.registration_generalized_icp(src, tgt, distance, current, est, criteria)
+        kernel = (
+            None if self.method == "point_to_point" else _robust_kernel(self.kernel, None, distance)
+        )
         if self.method == "point_to_plane":
             tgt = context.with_normals(tgt, f"target{tag}", 2.0 * voxel)
-            est = (
-                reg.TransformationEstimationPointToPlane(kernel)
-                if kernel is not None
-                else reg.TransformationEstimationPointToPlane()
-            )
-        else:
-            est = reg.TransformationEstimationPointToPoint(False)
-        with _repeatable_open3d():
-            return reg.registration_icp(src, tgt, distance, current, est, criteria)
+        estimation = _estimation(self.method, kernel)
+        return _icp(self.method, src, tgt, distance, current, estimation, criteria)

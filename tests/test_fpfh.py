@@ -1,0 +1,77 @@
+"""FPFHTransformer: the FPFH peer behind the transformer interface."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+import pytest
+from sklearn.base import clone
+
+from o3d_rpointhop import FPFHTransformer
+from o3d_rpointhop.datasets import make_object
+
+
+def _reference(points, radius=0.25, normal_radius=0.1):
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=normal_radius, max_nn=30))
+    feature = o3d.pipelines.registration.compute_fpfh_feature(
+        pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=100)
+    )
+    return np.asarray(feature.data).T
+
+
+def test_matches_open3d_and_needs_no_fit():
+    pts = make_object(500, shape_seed=1)
+    fpfh = FPFHTransformer()
+    out = fpfh.transform(pts)  # no fit needed
+    assert out.shape == (500, 33)
+    np.testing.assert_allclose(out, _reference(pts))
+    fitted = clone(fpfh).fit(pts)
+    assert fitted.n_features_in_ == 3 and fitted.n_features_out_ == 33
+    assert list(fitted.get_feature_names_out()[:2]) == ["fpfhtransformer0", "fpfhtransformer1"]
+
+
+def test_input_forms_and_existing_normals():
+    pts = make_object(400, shape_seed=2)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    pcd.normals = o3d.utility.Vector3dVector(np.tile([0.0, 0.0, 1.0], (400, 1)))
+    fpfh = FPFHTransformer()
+    with_own = fpfh.transform(pcd)
+    estimated = fpfh.set_params(use_existing_normals=False).transform(pcd)
+    assert not np.allclose(with_own, estimated)  # the given normals were used
+    outs = FPFHTransformer().transform([pts, pts[:300]])
+    assert [o.shape for o in outs] == [(400, 33), (300, 33)]
+    batch = FPFHTransformer().transform(np.stack([pts, pts]))
+    assert batch.shape == (2, 400, 33)
+
+
+def test_auto_radii_follow_the_units():
+    pts = make_object(600, shape_seed=3)
+    auto = FPFHTransformer(radius="auto", normal_radius="auto")
+    big, small = auto.transform(pts * 1000.0), auto.transform(pts)
+    # the same neighbourhoods at both scales; a few angles fall into the next histogram
+    # bin after rounding, so the histograms agree closely rather than exactly
+    assert np.abs(big - small).mean() < 0.02 * np.abs(small).mean()
+    fixed = FPFHTransformer(radius=0.25, normal_radius=0.1)
+    assert np.abs(fixed.transform(pts * 1000.0) - small).mean() > 0.2 * np.abs(small).mean()
+
+
+@pytest.mark.parametrize(
+    "params, message",
+    [
+        (dict(radius=0), "radius"),
+        (dict(normal_radius="big"), "normal_radius"),
+        (dict(max_nn=0), "max_nn"),
+        (dict(normal_max_nn=2.5), "normal_max_nn"),
+    ],
+)
+def test_bad_parameters(params, message):
+    with pytest.raises(ValueError, match=message):
+        FPFHTransformer(**params).transform(make_object(100))
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="NaN"):
+        FPFHTransformer().transform(np.full((50, 3), np.nan))
+    with pytest.raises(ValueError, match="no spatial extent"):
+        FPFHTransformer(radius="auto").transform(np.zeros((50, 3)))
