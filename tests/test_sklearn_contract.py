@@ -41,6 +41,7 @@ NOT_APPLICABLE["check_methods_subset_invariance"] = (
 SMALL = dict(n_neighbors=(4, 3), hop_sizes=(1.0, 0.5), lrf_neighbors=5)
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")
 def test_sklearn_check_estimator():
     results = check_estimator(
         RPointHopTransformer(**SMALL), expected_failed_checks=NOT_APPLICABLE, on_fail=None

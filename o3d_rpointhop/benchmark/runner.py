@@ -85,6 +85,21 @@ def _machine() -> dict:
     }
 
 
+def _model_facts(model: RPointHopTransformer) -> dict:
+    """Size of the model's file and of its descriptors (the 'green' figures)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "model.npz"
+        model.save(path)
+        size = path.stat().st_size
+    return {
+        "model_file_bytes": size,
+        "model_n_features_out": int(model.n_features_out_),
+        "model_params": model.get_params(),
+    }
+
+
 def _check_methods(methods: Iterable[str]) -> list[str]:
     methods = list(methods)
     unknown = [m for m in methods if m not in METHODS]
@@ -162,17 +177,20 @@ def run_modelnet40(
             "test_shapes": len(test) if max_shapes is None else min(max_shapes, len(test)),
             "fpfh_voxel": MODELNET40_FPFH_VOXEL,
             "success": "rotation error < 5 deg and translation error < 0.05",
-            "model": model.get_params(),
+            **_model_facts(model),
             **_machine(),
         },
         "protocols": {},
     }
     for protocol in protocols:
         shapes, protocol_model = test.points, model
+        fit_seconds = None
         if protocol == "paper-unseen-classes":
             shapes = test.points[test.labels >= 20]
             seen = train.points[train.labels < 20]
+            start = time.perf_counter()
             protocol_model = RPointHopTransformer(**model.get_params()).fit(list(seen))
+            fit_seconds = time.perf_counter() - start
         if max_shapes is not None:
             shapes = shapes[:max_shapes]
         if protocol == "angle-sweep":
@@ -197,6 +215,9 @@ def run_modelnet40(
             "summary": summary,
             "records": records,
         }
+        if fit_seconds is not None:
+            out["protocols"][protocol]["fit_seconds"] = fit_seconds
+            out["protocols"][protocol]["fit_shapes"] = int(len(seen))
     return out
 
 
@@ -226,7 +247,7 @@ def run_bunny(
     scans = load_bunny(BUNNY_SCANS, data)
     out = {
         "dataset": "bunny",
-        "settings": {"seed": seed, "model": model.get_params(), **_machine()},
+        "settings": {"seed": seed, **_model_facts(model), **_machine()},
         "protocols": {},
     }
     rng = np.random.default_rng(seed)
@@ -307,7 +328,7 @@ def run_3dmatch(
     pairs = load_3dmatch_pairs(data)
     out = {
         "dataset": "3dmatch",
-        "settings": {"seed": seed, "model": model.get_params(), **_machine()},
+        "settings": {"seed": seed, **_model_facts(model), **_machine()},
         "protocols": {},
     }
     bar = Progress(len(methods) * len(pairs) + 2 * len(pairs), "3dmatch", progress)
@@ -410,12 +431,23 @@ def markdown(results: dict) -> str:
         f"Machine: {settings['machine']}; Python {settings['python']}, Open3D "
         f"{settings['open3d']}, numpy {settings['numpy']}; seed {settings['seed']}."
     )
+    if "model_file_bytes" in settings:
+        lines.append(
+            f"R-PointHop model: {settings['model_n_features_out']}-D descriptors, "
+            f"{settings['model_file_bytes']:,} bytes on disk."
+        )
     for name, protocol in results["protocols"].items():
         lines += ["", f"## {name}", ""]
         if "description" in protocol:
             lines += [protocol["description"] + ".", ""]
         if "success" in protocol:
             lines += [f"Success: {protocol['success']}.", ""]
+        if "fit_seconds" in protocol:
+            lines += [
+                f"Model fitted for this protocol on {protocol['fit_shapes']} shapes in "
+                f"{protocol['fit_seconds']:.1f} s.",
+                "",
+            ]
         if "angles" in protocol:
             methods = list(next(iter(protocol["summary"].values())))
             lines.append("| max angle (deg) | " + " | ".join(

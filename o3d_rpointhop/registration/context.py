@@ -14,10 +14,6 @@ from ..open3d_interop import to_point_cloud
 __all__ = ["RegistrationContext", "resolve_voxel_size"]
 
 
-def _downsample(cloud: o3d.geometry.PointCloud, voxel: float) -> o3d.geometry.PointCloud:
-    return cloud.voxel_down_sample(voxel)
-
-
 def resolve_voxel_size(
     source: o3d.geometry.PointCloud,
     target: o3d.geometry.PointCloud,
@@ -46,7 +42,7 @@ def resolve_voxel_size(
     # Surfaces: the point count falls with the square of the voxel size.
     voxel = spacing * np.sqrt(largest / n_global_points)
     for _ in range(10):
-        kept = max(len(_downsample(source, voxel).points), len(_downsample(target, voxel).points))
+        kept = max(len(c.voxel_down_sample(voxel).points) for c in (source, target))
         if kept <= 1.15 * n_global_points:
             break
         voxel *= np.sqrt(kept / n_global_points)
@@ -105,7 +101,9 @@ class RegistrationContext:
         """The cloud the global step works on (downsampled when the clouds are large)."""
         if which not in self._global:
             full = self.cloud(which)
-            self._global[which] = _downsample(full, self.voxel_size) if self.downsampled else full
+            self._global[which] = (
+                full.voxel_down_sample(self.voxel_size) if self.downsampled else full
+            )
         return self._global[which]
 
     def features(self, descriptor: Any, which: str) -> np.ndarray:
