@@ -23,7 +23,7 @@ from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.transforms import rotation_error_deg, translation_error
 
 if "--bunny" in sys.argv:
-    from o3d_rpointhop.datasets.bunny import load_bunny
+    from o3d_rpointhop.datasets import load_bunny
 
     scans = load_bunny(("bun000", "bun045"))
     source, target = scans["bun045"].points, scans["bun000"].points

@@ -16,6 +16,7 @@ from .registration import (
     RegistrationResult,
     RegistrationStep,
     SVDGlobal,
+    SymmetryCheck,
     register,
 )
 from .rpointhop import RPointHopTransformer
@@ -35,6 +36,7 @@ __all__ = [
     "RegistrationResult",
     "RegistrationStep",
     "SVDGlobal",
+    "SymmetryCheck",
     "__version__",
     "find_correspondences",
     "register",

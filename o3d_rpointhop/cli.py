@@ -109,6 +109,15 @@ def _read_matrix(path: str) -> np.ndarray:
     return matrix
 
 
+def _refine_chain(args) -> list[str]:
+    chain = [] if args.refine == "none" else [args.refine]
+    if args.symmetry_check:
+        if not chain:
+            raise CommandError("--symmetry-check needs an ICP refinement (--refine)")
+        chain.append("symmetry_check")
+    return chain
+
+
 def cmd_register(args: argparse.Namespace) -> int:
     from .fpfh import FPFHTransformer
     from .io import read_cloud, write_cloud
@@ -128,7 +137,7 @@ def cmd_register(args: argparse.Namespace) -> int:
         target,
         descriptor,
         global_method=None if args.global_method == "none" else args.global_method,
-        refine=None if args.refine == "none" else args.refine,
+        refine=_refine_chain(args),
         voxel_size=args.voxel_size,
         n_global_points=args.n_global_points,
         init=init,
@@ -307,6 +316,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["point_to_plane", "point_to_point", "generalized", "multiscale", "none"],
         default="point_to_plane",
         help="ICP refinement (default: point_to_plane)",
+    )
+    p.add_argument(
+        "--symmetry-check",
+        action="store_true",
+        help="after ICP, also try the estimate's 180-degree twins and keep the best fit "
+        "(objects seen whole; see docs/registration.md)",
     )
     p.add_argument("--voxel-size", type=_voxel, default="auto", help="'auto' or a length")
     p.add_argument("--n-global-points", type=int, default=2048)

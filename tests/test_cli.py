@@ -168,9 +168,13 @@ def test_register_options(tmp_path, capsys):
         ["--descriptor", "fpfh"],
         ["--global", "svd", "--refine", "none"],
         ["--global", "fgr", "--refine", "multiscale", "--voxel-size", "0.04"],
+        ["--refine", "point_to_point", "--symmetry-check"],
     ):
         assert main(["register", src, tgt, "--json", *extra]) == 0, extra
         result = json.loads(capsys.readouterr().out)
+        assert ("symmetry_check" in [s["name"] for s in result["steps"]]) == (
+            "--symmetry-check" in extra
+        )
         estimate = np.array(result["transformation"])
         assert np.abs(estimate - truth).max() < 0.02, extra
     init = tmp_path / "init.txt"
@@ -187,6 +191,7 @@ def test_register_options(tmp_path, capsys):
         (["--descriptor", "fpfh", "--model", "m.npz"], "--model applies to the rpointhop"),
         (["--init", "bad.txt"], "not 4x4"),
         (["--model", "missing.npz"], "no such model file"),
+        (["--refine", "none", "--symmetry-check"], "--symmetry-check needs an ICP"),
     ],
 )
 def test_register_errors(tmp_path, monkeypatch, capsys, extra, message):

@@ -40,6 +40,10 @@ METHODS = {
         Method("rpointhop-svd-icp", "R-PointHop + SVD + point-to-plane ICP"),
         Method("rpointhop-ransac", "R-PointHop + RANSAC"),
         Method("rpointhop-ransac-icp", "R-PointHop + RANSAC + point-to-plane ICP"),
+        Method(
+            "rpointhop-ransac-icp-sym",
+            "R-PointHop + RANSAC + point-to-plane ICP + symmetry check",
+        ),
         Method("fpfh-ransac", "FPFH + RANSAC (Open3D's recipe)"),
         Method("fpfh-fgr", "FPFH + FGR (Open3D's recipe)"),
         Method("fpfh-ransac-icp", "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe)"),
@@ -132,6 +136,11 @@ def run_method(
         ),
         "rpointhop-ransac-icp": lambda: (
             register(source, target, descriptor, seed=seed).transformation
+        ),
+        "rpointhop-ransac-icp-sym": lambda: (
+            register(
+                source, target, descriptor, refine=["point_to_plane", "symmetry_check"], seed=seed
+            ).transformation
         ),
         "fpfh-ransac": lambda: _fpfh_ransac(source, target, voxel, seed),
         "fpfh-fgr": lambda: _fpfh_fgr(source, target, voxel, seed),

@@ -13,6 +13,7 @@ from .steps import (
     StepResult,
     SVDGlobal,
 )
+from .symmetry import SymmetryCheck
 
 __all__ = [
     "FGRGlobal",
@@ -27,5 +28,6 @@ __all__ = [
     "RegistrationStep",
     "SVDGlobal",
     "StepResult",
+    "SymmetryCheck",
     "register",
 ]

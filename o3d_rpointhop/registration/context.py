@@ -92,6 +92,7 @@ class RegistrationContext:
         self._global: dict[str, o3d.geometry.PointCloud] = {}
         self._features: dict[tuple[int, str], np.ndarray] = {}
         self._normals: dict[tuple, o3d.geometry.PointCloud] = {}
+        self._coarse: RegistrationContext | None = None
 
     def cloud(self, which: str) -> o3d.geometry.PointCloud:
         """The full-resolution ``"source"`` or ``"target"``."""
@@ -105,6 +106,21 @@ class RegistrationContext:
                 full.voxel_down_sample(self.voxel_size) if self.downsampled else full
             )
         return self._global[which]
+
+    def coarse(self) -> RegistrationContext:
+        """A context whose clouds are this one's global clouds, at the same resolution
+        (for cheap trial refinements); ``self`` when the global step does not downsample."""
+        if not self.downsampled:
+            return self
+        if self._coarse is None:
+            self._coarse = RegistrationContext(
+                self.global_cloud("source"),
+                self.global_cloud("target"),
+                voxel_size=self.voxel_size,
+                seed=self.seed,
+                descriptor=self.descriptor,
+            )
+        return self._coarse
 
     def features(self, descriptor: Any, which: str) -> np.ndarray:
         """Descriptors of the global cloud, computed once per descriptor object."""

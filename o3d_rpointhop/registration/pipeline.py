@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from sklearn.base import BaseEstimator
+from sklearn.base import BaseEstimator, clone
 
 from .context import RegistrationContext
 from .steps import (
@@ -23,6 +23,7 @@ from .steps import (
     SVDGlobal,
     evaluate,
 )
+from .symmetry import SymmetryCheck
 
 __all__ = [
     "RegistrationResult",
@@ -38,6 +39,7 @@ REFINE_METHODS = {
     "point_to_plane": PointToPlaneICP,
     "generalized": GeneralizedICP,
     "multiscale": MultiScaleICP,
+    "symmetry_check": SymmetryCheck,
 }
 
 
@@ -270,8 +272,13 @@ def register(
     global_method : {"ransac", "fgr", "svd"}, RegistrationStep or None, default="ransac"
         ``"svd"`` is the paper's one-shot estimate; ``None`` skips the global step (ICP
         from ``init``).
-    refine : {"point_to_plane", "point_to_point", "generalized", "multiscale"}, step, \
-            list of those, or None, default="point_to_plane"
+    refine : {"point_to_plane", "point_to_point", "generalized", "multiscale", \
+            "symmetry_check"}, step, list of those, or None, default="point_to_plane"
+        Run in order. ``"symmetry_check"`` (:class:`SymmetryCheck`) after an ICP step
+        also tries the estimate's 180-degree twins, refined by a copy of that step, and
+        keeps the best-fitting: for objects seen whole (it corrects near-symmetric
+        shapes registered turned over), not for partial overlaps, where a twin can fit
+        the overlap better than the truth.
     voxel_size : float or "auto", default="auto"
         See :class:`RegistrationPipeline`.
     n_global_points : int, default=2048
@@ -297,8 +304,14 @@ def register(
     if global_method is not None:
         steps.append(("global", _make_step(global_method, GLOBAL_METHODS, "global_method")))
     refinements = refine if isinstance(refine, (list, tuple)) else [refine]
+    previous = None
     for i, spec in enumerate(r for r in refinements if r is not None and r != "none"):
-        steps.append((f"refine{i}" if i else "refine", _make_step(spec, REFINE_METHODS, "refine")))
+        if spec == "symmetry_check":  # twins are refined like the estimate was
+            step = SymmetryCheck(refine=None if previous is None else clone(previous))
+            steps.append(("symmetry_check", step))
+            continue
+        previous = _make_step(spec, REFINE_METHODS, "refine")
+        steps.append((f"refine{i}" if i else "refine", previous))
     if not steps:
         raise ValueError("nothing to do: global_method and refine are both None")
     pipeline = RegistrationPipeline(
