@@ -22,11 +22,9 @@ import numpy as np
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.benchmark.methods import run_method
-from o3d_rpointhop.benchmark.runner import _rmse_3dmatch
-from o3d_rpointhop.correspondences import find_correspondences
+from o3d_rpointhop.benchmark.metrics import match_inlier_ratio, rmse_3dmatch
 from o3d_rpointhop.datasets import load_3dmatch_pairs
 from o3d_rpointhop.registration.context import RegistrationContext
-from o3d_rpointhop.transforms import apply_transform
 
 
 def downsampled(points: np.ndarray) -> np.ndarray:
@@ -52,17 +50,6 @@ def held_out_models(pairs) -> tuple[dict, dict]:
     return models, facts
 
 
-def inlier_ratio(pair, model) -> float:
-    context = RegistrationContext(pair.source, pair.target)
-    src = np.asarray(context.global_cloud("source").points)
-    tgt = np.asarray(context.global_cloud("target").points)
-    corr = find_correspondences(
-        context.features(model, "source"), context.features(model, "target"), mutual=True
-    )
-    moved = apply_transform(src[corr.pairs[:, 0]], pair.truth)
-    return float((np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < 0.1).mean())
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=None)
@@ -73,16 +60,21 @@ def main() -> None:
     pretrained = RPointHopTransformer.pretrained()
     rows = []
     for pair in pairs:
-        voxel = RegistrationContext(pair.source, pair.target).voxel_size
+        context = RegistrationContext(pair.source, pair.target)
         for name, model in (("pretrained", pretrained), ("scenes", scene_models[pair.scene])):
             estimate, seconds = run_method(
-                "rpointhop-ransac-icp", pair.source, pair.target, descriptor=model, voxel=voxel
+                "rpointhop-ransac-icp",
+                pair.source,
+                pair.target,
+                descriptor=model,
+                voxel=context.voxel_size,
             )
-            rmse = _rmse_3dmatch(estimate, pair.truth, pair.information)
+            rmse = rmse_3dmatch(estimate, pair.truth, pair.information)
             rows.append({
                 "pair": f"{pair.scene} {pair.i}-{pair.j}", "benchmark": pair.benchmark,
                 "model": name, "rmse": rmse, "registered": bool(rmse < 0.2),
-                "inlier_ratio": inlier_ratio(pair, model), "seconds": seconds,
+                "inlier_ratio": match_inlier_ratio(context, model, pair.truth),
+                "seconds": seconds,
             })  # fmt: skip
             print(json.dumps(rows[-1]), flush=True)
     summary = {}

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from o3d_rpointhop.benchmark.methods import METHODS, run_method
-from o3d_rpointhop.benchmark.metrics import is_symmetry, pair_errors, summarize
+from o3d_rpointhop.benchmark.metrics import (
+    is_symmetry,
+    match_inlier_ratio,
+    pair_errors,
+    rmse_3dmatch,
+    summarize,
+)
 from o3d_rpointhop.benchmark.protocols import PROTOCOLS, crop_nearest, make_pairs
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.transforms import apply_transform
@@ -158,3 +164,25 @@ def test_modelnet40_loader_reads_the_official_h5_layout(tmp_path):
     np.testing.assert_allclose(raw.points[:3], shapes[0], rtol=1e-6)
     with pytest.raises(FileNotFoundError, match="no ModelNet40 train data"):
         load_modelnet40("train", tmp_path)
+
+
+def test_3dmatch_error_and_match_inlier_ratio():
+    from scipy.spatial.transform import Rotation
+
+    from o3d_rpointhop import FPFHTransformer
+    from o3d_rpointhop.registration.context import RegistrationContext
+
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    truth[:3, 3] = [0.5, 0.1, -0.2]
+    info = np.diag([2.0, 2.0, 2.0, 1.0, 1.0, 1.0])
+    assert rmse_3dmatch(truth, truth, info) == pytest.approx(0.0, abs=1e-12)
+    shifted = truth @ np.array([[1, 0, 0, 0.3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+    assert rmse_3dmatch(shifted, truth, info) == pytest.approx(0.3)  # sqrt(2 * 0.09 / 2)
+
+    target = make_object(800, shape_seed=3)
+    source = apply_transform(target, np.linalg.inv(truth))  # truth maps source to target
+    context = RegistrationContext(source, target)
+    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
+    assert match_inlier_ratio(context, fpfh, truth) > 0.5
+    assert match_inlier_ratio(context, fpfh, shifted, radius=0.1) == 0.0

@@ -1,4 +1,5 @@
-"""Registration error measures: the paper's Euler-angle errors, isotropic errors, success."""
+"""Registration error measures: the paper's Euler-angle errors, isotropic errors, success,
+and 3DMatch's official registration error and descriptor inlier ratio."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from scipy.spatial import cKDTree
 
 from ..transforms import apply_transform, euler_angles_deg, rotation_error_deg, translation_error
 
-__all__ = ["pair_errors", "summarize", "is_symmetry"]
+__all__ = ["pair_errors", "summarize", "is_symmetry", "rmse_3dmatch", "match_inlier_ratio"]
 
 
 def _wrap(deg: np.ndarray) -> np.ndarray:
@@ -76,3 +77,33 @@ def summarize(
         kept = ~(sym & ~success)
         out["mae_r_not_symmetric"] = float(np.mean(np.abs(euler[kept]))) if kept.any() else 0.0
     return out
+
+
+def rmse_3dmatch(estimate: np.ndarray, truth: np.ndarray, information: np.ndarray) -> float:
+    """The official 3DMatch registration error: sqrt(xi^T I xi / I[0, 0]), with xi the
+    translation and quaternion vector part of ``inv(truth) @ estimate`` and ``I`` the
+    pair's ``gt.info`` matrix (a pair counts as registered below 0.2 m)."""
+    from scipy.spatial.transform import Rotation
+
+    delta = np.linalg.inv(truth) @ estimate
+    quat = Rotation.from_matrix(delta[:3, :3]).as_quat()  # x, y, z, w
+    if quat[3] < 0:
+        quat = -quat
+    xi = np.r_[delta[:3, 3], quat[:3]]
+    return float(np.sqrt(max(xi @ information @ xi / information[0, 0], 0.0)))
+
+
+def match_inlier_ratio(context, descriptor, truth: np.ndarray, radius: float = 0.1) -> float:
+    """Share of the mutual nearest-descriptor matches between the global clouds of a
+    :class:`~o3d_rpointhop.registration.context.RegistrationContext` that lie within
+    ``radius`` of each other under ``truth`` (feature-match recall counts a pair when
+    this exceeds 0.05)."""
+    from ..correspondences import find_correspondences
+
+    src = np.asarray(context.global_cloud("source").points)
+    tgt = np.asarray(context.global_cloud("target").points)
+    corr = find_correspondences(
+        context.features(descriptor, "source"), context.features(descriptor, "target"), mutual=True
+    )
+    moved = apply_transform(src[corr.pairs[:, 0]], truth)
+    return float((np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < radius).mean())

@@ -16,7 +16,7 @@ from ..registration.context import resolve_voxel_size
 from ..rpointhop import RPointHopTransformer
 from ..transforms import rotation_error_deg, translation_error
 from .methods import METHODS, run_method
-from .metrics import is_symmetry, pair_errors, summarize
+from .metrics import is_symmetry, match_inlier_ratio, pair_errors, rmse_3dmatch, summarize
 from .protocols import PROTOCOLS, make_pairs
 
 __all__ = [
@@ -290,18 +290,6 @@ def run_bunny(
     return out
 
 
-def _rmse_3dmatch(estimate: np.ndarray, truth: np.ndarray, information: np.ndarray) -> float:
-    """The official 3DMatch registration error: sqrt(xi^T I xi / I[0, 0])."""
-    from scipy.spatial.transform import Rotation
-
-    delta = np.linalg.inv(truth) @ estimate
-    quat = Rotation.from_matrix(delta[:3, :3]).as_quat()  # x, y, z, w
-    if quat[3] < 0:
-        quat = -quat
-    xi = np.r_[delta[:3, 3], quat[:3]]
-    return float(np.sqrt(max(xi @ information @ xi / information[0, 0], 0.0)))
-
-
 def run_3dmatch(
     methods: Iterable[str],
     *,
@@ -317,11 +305,9 @@ def run_3dmatch(
     nearest-descriptor matches (on the registration's downsampled clouds) lie within
     0.1 m of each other under the ground truth.
     """
-    from ..correspondences import find_correspondences
     from ..datasets.threedmatch import load_3dmatch_pairs
     from ..fpfh import FPFHTransformer
     from ..registration.context import RegistrationContext
-    from ..transforms import apply_transform
 
     methods = _check_methods(methods)
     model = model if model is not None else RPointHopTransformer.pretrained()
@@ -336,19 +322,12 @@ def run_3dmatch(
     fmr = {name: [] for name in descriptors}
     for pair in pairs:
         context = RegistrationContext(pair.source, pair.target)
-        src = np.asarray(context.global_cloud("source").points)
-        tgt = np.asarray(context.global_cloud("target").points)
         for name, descriptor in descriptors.items():
-            corr = find_correspondences(
-                context.features(descriptor, "source"),
-                context.features(descriptor, "target"),
-                mutual=True,
-            )
-            moved = apply_transform(src[corr.pairs[:, 0]], pair.truth)
-            inlier = np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < 0.1
-            fmr[name].append({"pair": f"{pair.scene} {pair.i}-{pair.j}",
-                              "benchmark": pair.benchmark,
-                              "inlier_ratio": float(inlier.mean())})  # fmt: skip
+            fmr[name].append({
+                "pair": f"{pair.scene} {pair.i}-{pair.j}",
+                "benchmark": pair.benchmark,
+                "inlier_ratio": match_inlier_ratio(context, descriptor, pair.truth),
+            })  # fmt: skip
             bar.step(f"fmr {name}")
     for bench in ("3DMatch", "3DLoMatch"):
         chosen = [p for p in pairs if p.benchmark == bench]
@@ -364,7 +343,7 @@ def run_3dmatch(
                 estimate, seconds = run_method(
                     method, pair.source, pair.target, descriptor=model, voxel=voxel, seed=seed
                 )
-                rmse = _rmse_3dmatch(estimate, pair.truth, pair.information)
+                rmse = rmse_3dmatch(estimate, pair.truth, pair.information)
                 recs.append({
                     "pair": f"{pair.scene} {pair.i}-{pair.j}", "overlap": pair.overlap,
                     "rmse": rmse, "registered": rmse < 0.2, "seconds": seconds,
