@@ -19,7 +19,7 @@ from sklearn.base import clone
 from .context import RegistrationContext
 from .steps import PointToPlaneICP, RegistrationStep, StepResult, _distance, evaluate
 
-__all__ = ["SymmetryCheck", "twin_transformations", "truncated_cost"]
+__all__ = ["SymmetryCheck", "fits_better", "twin_transformations", "truncated_cost"]
 
 
 def twin_transformations(points: np.ndarray, transformation: np.ndarray) -> np.ndarray:
@@ -56,17 +56,38 @@ def truncated_cost(fitness: float, inlier_rmse: float, threshold: float) -> floa
     return fitness * inlier_rmse**2 + (1.0 - fitness) * threshold**2
 
 
+def fits_better(
+    candidate: StepResult, incumbent: StepResult, threshold: float, margin: float
+) -> bool:
+    """Whether ``candidate`` explains the data better than ``incumbent`` on every count:
+    at least the same fitness, at most the same inlier RMSE, and a truncated cost
+    (:func:`truncated_cost`) lower by more than ``margin`` (relative).
+
+    Requiring both counts keeps a candidate that trades accuracy for coverage from
+    winning: with partial overlaps, a turned-over twin can cover more of the other
+    cloud, loosely, than the true pose covers exactly.
+    """
+    cost = truncated_cost(candidate.fitness, candidate.inlier_rmse, threshold)
+    bar = (1.0 - margin) * truncated_cost(incumbent.fitness, incumbent.inlier_rmse, threshold)
+    return (
+        candidate.fitness >= incumbent.fitness
+        and candidate.inlier_rmse <= incumbent.inlier_rmse
+        and cost < bar
+    )
+
+
 class SymmetryCheck(RegistrationStep):
     """Try the estimate's 180-degree twins too, and keep whichever fits best.
 
     Runs after a refinement step. The incoming estimate and its three twins (turned by
     180 degrees about each principal axis of the moved source, see
     :func:`twin_transformations`) are each refined with ``refine`` on the global step's
-    clouds (cheap: about ``n_global_points`` points) and scored there by the mean
-    truncated squared residual at ``threshold`` (:func:`truncated_cost`). A twin
-    replaces the estimate only when its cost is lower by more than ``margin``
-    (relative), so an exactly symmetric shape keeps the global step's choice; the
-    winning twin is then refined again on the full clouds.
+    clouds (cheap: about ``n_global_points`` points) and measured there at
+    ``threshold``. A twin replaces the estimate only when it fits better on every count
+    (:func:`fits_better`: fitness no lower, inlier RMSE no higher, mean truncated squared
+    residual lower by more than ``margin``), so an exactly symmetric shape keeps the
+    global step's choice, and so does a partial overlap where a twin covers more of the
+    other cloud but less closely; the winning twin is then refined on the full clouds.
 
     On the ModelNet40 paper protocol with noise this recovers the two near-symmetric
     shapes (a keyboard, a bench) that RANSAC returned turned over; see
@@ -81,7 +102,7 @@ class SymmetryCheck(RegistrationStep):
         Truncation distance of the score; ``None`` is ``2 x voxel_size`` (the distance
         of ICP's first pass).
     margin : float, default=0.1
-        Relative improvement a twin needs to replace the estimate.
+        Relative improvement of the truncated cost a twin needs to replace the estimate.
     """
 
     def __init__(
@@ -112,13 +133,15 @@ class SymmetryCheck(RegistrationStep):
         current = np.asarray(transformation, dtype=np.float64)
         coarse = context.coarse()
         starts = [current, *twin_transformations(np.asarray(coarse.source.points), current)]
-        refined, costs = [], []
-        for candidate in starts:
-            refined.append(refine.run(coarse, candidate).transformation)
-            check = evaluate(coarse, refined[-1], threshold)
-            costs.append(truncated_cost(check.fitness, check.inlier_rmse, threshold))
-        best = int(np.argmin(costs))
-        chosen = best - 1 if costs[best] < (1.0 - margin) * costs[0] else -1
+        refined = [refine.run(coarse, candidate).transformation for candidate in starts]
+        checks = [evaluate(coarse, t, threshold) for t in refined]
+        costs = [truncated_cost(c.fitness, c.inlier_rmse, threshold) for c in checks]
+        incumbent = checks[0]
+        better = [
+            k for k in range(1, len(checks)) if fits_better(checks[k], incumbent, threshold, margin)
+        ]
+        best = min(better, key=costs.__getitem__, default=0)
+        chosen = best - 1
         if chosen >= 0:
             current = refined[best]
             if coarse is not context:  # the trial ran on the global clouds: finish on the full
