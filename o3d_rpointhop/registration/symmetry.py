@@ -77,7 +77,7 @@ def fits_better(
 
 
 class SymmetryCheck(RegistrationStep):
-    """Try the estimate's 180-degree twins too, and keep whichever fits best.
+    """Try the estimate's 180-degree twins too, and take one that fits better throughout.
 
     Runs after a refinement step. The incoming estimate and its three twins (turned by
     180 degrees about each principal axis of the moved source, see
