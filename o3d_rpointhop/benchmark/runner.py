@@ -115,11 +115,12 @@ def _evaluate(pairs, methods, model, voxel_of, seed, progress, shapes=None, tol=
     success threshold (rotation in degrees, translation in the data's unit).
     """
     summaries, records = {}, {}
+    voxels = [voxel_of(pair) for pair in pairs]  # once per pair, not once per method
     for method in methods:
         recs = []
         for k, pair in enumerate(pairs):
             estimate, seconds = run_method(
-                method, pair.source, pair.target, descriptor=model, voxel=voxel_of(pair), seed=seed
+                method, pair.source, pair.target, descriptor=model, voxel=voxels[k], seed=seed
             )
             rec = {**pair_errors(estimate, pair.truth), "seconds": seconds, "pair": pair.name}
             if shapes is not None:
@@ -320,8 +321,10 @@ def run_3dmatch(
     bar = Progress(len(methods) * len(pairs) + 2 * len(pairs), "3dmatch", progress)
     descriptors = {"rpointhop": model, "fpfh": FPFHTransformer(radius="auto", normal_radius="auto")}
     fmr = {name: [] for name in descriptors}
+    voxels = {}  # the resolution register() picks, per pair
     for pair in pairs:
         context = RegistrationContext(pair.source, pair.target)
+        voxels[id(pair)] = context.voxel_size
         for name, descriptor in descriptors.items():
             fmr[name].append({
                 "pair": f"{pair.scene} {pair.i}-{pair.j}",
@@ -337,12 +340,10 @@ def run_3dmatch(
         for method in methods:
             recs = []
             for pair in chosen:
-                voxel = resolve_voxel_size(
-                    to_point_cloud(pair.source), to_point_cloud(pair.target), "auto", 2048
-                )[0]
                 estimate, seconds = run_method(
-                    method, pair.source, pair.target, descriptor=model, voxel=voxel, seed=seed
-                )
+                    method, pair.source, pair.target, descriptor=model,
+                    voxel=voxels[id(pair)], seed=seed,
+                )  # fmt: skip
                 rmse = rmse_3dmatch(estimate, pair.truth, pair.information)
                 recs.append({
                     "pair": f"{pair.scene} {pair.i}-{pair.j}", "overlap": pair.overlap,
