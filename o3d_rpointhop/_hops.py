@@ -1,6 +1,6 @@
 """Per-cloud geometry of the R-PointHop hops, and the forward pass through fitted hops.
 
-The geometry of a cloud (its local reference frames, farthest point samples,
+The geometry of a cloud (its local reference frames, hop samples,
 neighbourhoods and octant memberships) does not depend on the learned kernels. It is
 computed once per cloud by :func:`build_geometry` and reduced to
 
@@ -13,8 +13,10 @@ The forward pass through fitted hops is then a handful of matrix products, used 
 when fitting (hop by hop over all clouds) and when transforming.
 
 Hop ``h`` (1-based) takes its queries from the sample ``S_h`` and its neighbours from
-``S_{h-1}``, where ``S_0`` is the whole cloud and ``S_h`` is the farthest point sample
-of size ``hop_sizes[h-1]``. When transforming, the last hop takes every input point as
+``S_{h-1}``, where ``S_0`` is the whole cloud and ``S_h`` is a sample of size
+``hop_sizes[h-1]`` drawn from ``S_{h-1}`` (farthest points for clouds of up to
+:data:`~o3d_rpointhop._sampling.FPS_MAX_POINTS` points, Poisson disks above; see
+:mod:`o3d_rpointhop._sampling`). When transforming, the last hop takes every input point as
 a query, so every point gets a descriptor.
 """
 
@@ -28,10 +30,15 @@ from typing import Any
 import numpy as np
 
 from ._lrf import local_reference_frames, project
-from ._neighbors import drop_self, fps_subsets, knn
+from ._neighbors import NeighborIndex, drop_self
 from ._octants import OctantPooling, coordinate_octant_means, octant_index
+from ._sampling import hop_subsets
 
-__all__ = ["CloudGeometry", "HopConfig", "build_geometry", "cloud_scale"]
+__all__ = ["CloudGeometry", "HopConfig", "build_geometry", "cloud_scale", "SAMPLING_METHODS"]
+
+#: Points whose neighbourhoods (about 3 kB each in float64) are in memory at once.
+GEOMETRY_CHUNK = 16384
+SAMPLING_METHODS = ("auto", "fps", "poisson")
 
 
 def is_int(value: Any, low: int) -> bool:
@@ -56,10 +63,16 @@ class HopConfig:
     n_neighbors: tuple[int, ...]
     lrf_neighbors: int
     scale: str | float
+    sampling: str = "auto"
 
     @classmethod
     def from_params(
-        cls, n_neighbors: Any, hop_sizes: Any, lrf_neighbors: Any, scale: Any
+        cls,
+        n_neighbors: Any,
+        hop_sizes: Any,
+        lrf_neighbors: Any,
+        scale: Any,
+        sampling: Any = "auto",
     ) -> HopConfig:
         """Validate the estimator's hop parameters; raise ValueError naming the bad one."""
         try:
@@ -99,11 +112,14 @@ class HopConfig:
             raise ValueError(f"scale must be 'auto' or a positive number, got {scale!r}")
         else:
             scale = float(scale)
+        if sampling not in SAMPLING_METHODS:
+            raise ValueError(f"sampling must be one of {SAMPLING_METHODS}, got {sampling!r}")
         return cls(
             hop_sizes=sizes,
             n_neighbors=tuple(int(k) for k in n_neighbors),
             lrf_neighbors=int(lrf_neighbors),
             scale=scale,
+            sampling=sampling,
         )
 
     @property
@@ -162,15 +178,15 @@ class CloudGeometry:
         return self.hop1_attributes.nbytes + sum(p.nbytes for p in self.poolings)
 
 
-def cloud_scale(sq_distances: np.ndarray, scale: str | float) -> float:
+def cloud_scale(mean_dist: np.ndarray, scale: str | float) -> float:
     """The length that hop-1 coordinates are divided by.
 
-    ``"auto"``: the median over points of the mean distance to their LRF neighbours, so
-    descriptors do not depend on the unit (metres, millimetres, unit sphere).
+    ``"auto"``: the median over points of ``mean_dist``, each point's mean distance to
+    its LRF neighbours, so descriptors do not depend on the unit (metres, millimetres,
+    unit sphere).
     """
     if scale != "auto":
         return float(scale)
-    mean_dist = np.sqrt(sq_distances[:, 1:]).mean(axis=1)
     value = float(np.median(mean_dist))
     if value <= 0.0:
         value = float(mean_dist.mean())
@@ -181,16 +197,26 @@ def cloud_scale(sq_distances: np.ndarray, scale: str | float) -> float:
     return value
 
 
+def _rows_in(sorted_ids: np.ndarray, start: int, stop: int) -> tuple[int, int]:
+    """Positions ``lo:hi`` of the ids in ``[start, stop)`` in a sorted id array."""
+    lo, hi = np.searchsorted(sorted_ids, (start, stop))
+    return int(lo), int(hi)
+
+
 def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> CloudGeometry:
     """Compute the hop structure of one validated cloud.
+
+    Neighbourhoods are searched and expressed in their frames
+    :data:`GEOMETRY_CHUNK` queries at a time, and only their octants and neighbour rows
+    are kept (5 bytes per neighbour), so memory grows linearly with the cloud.
 
     Parameters
     ----------
     points : ndarray of shape (n, 3), float64
     config : HopConfig
     for_fit : bool
-        If True the last hop's queries are its farthest point sample (as in training);
-        otherwise they are all ``n`` points (one descriptor per input point).
+        If True the last hop's queries are its sample (as in training); otherwise they
+        are all ``n`` points (one descriptor per input point).
     """
     n = len(points)
     reason = config.shortfall(n)
@@ -203,47 +229,56 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
         raise ValueError("the cloud has no spatial extent: all its points coincide")
     n_hops = config.n_hops
     sizes = config.sample_sizes(n)
-    samples = fps_subsets(points, sizes if for_fit else sizes[:-1])
+    samples = hop_subsets(points, sizes if for_fit else sizes[:-1], config.sampling)
     everything = np.arange(n, dtype=np.int64)
     sources = [everything] + samples[: n_hops - 1]
     queries = samples if for_fit else samples + [everything]
-
-    # One search over the whole cloud serves the LRF, hop 1, and any later hop whose
-    # neighbours are drawn from the whole cloud.
+    # Hops whose neighbours come from the whole cloud share the LRF's search.
+    full = [h for h in range(n_hops) if len(sources[h]) == n]
     k_lrf = config.lrf_neighbors
-    k_all = max(
-        [k_lrf] + [config.n_neighbors[h] + 1 for h in range(n_hops) if len(sources[h]) == n]
-    )
-    nn_idx, nn_sq = knn(points, points, k_all)  # column 0: the point itself (distance 0)
+    k_all = max([k_lrf] + [config.n_neighbors[h] + 1 for h in full])
+    octants = [np.empty((len(queries[h]), config.n_neighbors[h]), np.uint8) for h in range(n_hops)]
+    neighbours = [np.empty(o.shape, np.int32) for o in octants]
+    hop1_sums = np.empty((len(queries[0]), 24))
+    frames = np.empty((n, 3, 3))
+    mean_dist = np.empty(n)
     planes = np.ascontiguousarray(points.T)  # (3, n)
-    offsets_all = np.take(planes, nn_idx, axis=1) - planes[:, :, None]  # (3, n, k_all)
-    # Every hop expresses its neighbours in these frames. (The paper re-decides the axis
-    # signs on each hop's neighbourhood; keeping the LRF's own signs, as the authors'
-    # code does, is cheaper and matched slightly better on resampled ModelNet40 pairs.)
-    towards = points.mean(axis=0)[:, None] - planes  # (3, n): each point to the centroid
-    frames, local_all = local_reference_frames(offsets_all, k_lrf, towards)
-    length = cloud_scale(nn_sq[:, :k_lrf], config.scale)
-
-    def neighbourhood(h: int) -> tuple[np.ndarray, np.ndarray]:
-        """Hop ``h``'s neighbours (rows of its source sample) and their octants."""
-        k = config.n_neighbors[h]
-        src, qry = sources[h], queries[h]
-        if len(src) == n:
+    centroid = points.mean(axis=0)[:, None]
+    index = NeighborIndex(points)
+    for start in range(0, n, GEOMETRY_CHUNK):
+        stop = min(n, start + GEOMETRY_CHUNK)
+        nn_idx, nn_sq = index.query(points[start:stop], k_all)  # column 0: the point itself
+        offsets = np.take(planes, nn_idx, axis=1) - planes[:, start:stop, None]
+        # Every hop expresses its neighbours in these frames. (The paper re-decides the
+        # axis signs on each hop's neighbourhood; keeping the LRF's own signs, as the
+        # authors' code does, is cheaper and matched slightly better on resampled
+        # ModelNet40 pairs.)
+        towards = centroid - planes[:, start:stop]  # each point to the centroid
+        frames[start:stop], local = local_reference_frames(offsets, k_lrf, towards)
+        mean_dist[start:stop] = np.sqrt(nn_sq[:, 1:k_lrf]).mean(axis=1)
+        for h in full:
+            k = config.n_neighbors[h]
+            lo, hi = _rows_in(queries[h], start, stop)
+            rows = queries[h][lo:hi] - start
             # Every query belongs to the searched cloud, so its first hit is itself.
-            nb = nn_idx[qry, 1 : k + 1]
-            local = local_all[:, qry, 1 : k + 1]
-        else:
-            idx, sq = knn(points[src], points[qry], k + 1)
+            block = local[:, rows, 1 : k + 1]
+            octants[h][lo:hi] = octant_index(block)
+            neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
+            if h == 0:
+                hop1_sums[lo:hi] = coordinate_octant_means(block, octants[h][lo:hi])
+        del nn_idx, nn_sq, offsets, local
+    for h in range(n_hops):
+        if h in full:
+            continue
+        k, src, qry = config.n_neighbors[h], sources[h], queries[h]
+        src_index = NeighborIndex(points[src])
+        for lo in range(0, len(qry), GEOMETRY_CHUNK):
+            hi = min(len(qry), lo + GEOMETRY_CHUNK)
+            idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
             nb = drop_self(idx, sq, k)
-            offsets = np.take(planes, src[nb], axis=1) - planes[:, qry, None]
-            local = project(offsets, frames[qry])
-        return nb, local
-
-    def pooling(h: int) -> OctantPooling:
-        nb, local = neighbourhood(h)
-        return OctantPooling(octant_index(local), nb, len(sources[h]))
-
-    _, local = neighbourhood(0)
-    hop1_attributes = coordinate_octant_means(local / length, octant_index(local))
-    poolings = [pooling(h) for h in range(1, n_hops)]
-    return CloudGeometry(n_points=n, hop1_attributes=hop1_attributes, poolings=poolings)
+            offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
+            octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
+            neighbours[h][lo:hi] = nb
+    length = cloud_scale(mean_dist, config.scale)
+    poolings = [OctantPooling(octants[h], neighbours[h], len(sources[h])) for h in range(1, n_hops)]
+    return CloudGeometry(n_points=n, hop1_attributes=hop1_sums / length, poolings=poolings)

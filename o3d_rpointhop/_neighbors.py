@@ -12,7 +12,29 @@ import numpy as np
 import open3d as o3d
 import open3d.core as o3c
 
-__all__ = ["knn", "drop_self", "fps_subsets", "invariant_start"]
+__all__ = ["NeighborIndex", "knn", "drop_self", "fps_subsets", "invariant_start"]
+
+
+class NeighborIndex:
+    """A k-d tree over ``points`` for many k-nearest-neighbour queries (built once).
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+    """
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.n_points = len(points)
+        self._search = o3c.nns.NearestNeighborSearch(o3c.Tensor(np.ascontiguousarray(points)))
+        self._search.knn_index()
+
+    def query(self, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` nearest points of every query, nearest first: indices ``(q, k)``
+        int64 and squared distances ``(q, k)`` float64."""
+        if k > self.n_points:
+            raise ValueError(f"cannot take {k} neighbours among {self.n_points} points")
+        idx, sq = self._search.knn_search(o3c.Tensor(np.ascontiguousarray(queries)), k)
+        return idx.numpy().astype(np.int64, copy=False), sq.numpy()
 
 
 def knn(points: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -32,10 +54,7 @@ def knn(points: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np
     """
     if k > len(points):
         raise ValueError(f"cannot take {k} neighbours among {len(points)} points")
-    search = o3c.nns.NearestNeighborSearch(o3c.Tensor(np.ascontiguousarray(points)))
-    search.knn_index()
-    idx, sq = search.knn_search(o3c.Tensor(np.ascontiguousarray(queries)), k)
-    return idx.numpy().astype(np.int64, copy=False), sq.numpy()
+    return NeighborIndex(points).query(queries, k)
 
 
 def drop_self(idx: np.ndarray, sq_distances: np.ndarray, k: int) -> np.ndarray:

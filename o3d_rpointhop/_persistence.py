@@ -1,6 +1,7 @@
 """Model files: a plain ``.npz`` of numeric arrays plus JSON metadata, read without pickle.
 
-Layout (format version 1)::
+Layout (format version 2; version 1 files, without the PCA entries and the
+``sampling`` and ``n_components`` parameters, still load)::
 
     metadata           0-d str array, JSON: format, format_version, library_version,
                        params, n_hops, n_features_out, n_training_clouds
@@ -8,6 +9,9 @@ Layout (format version 1)::
     hop{h}_means       (n_channels, dim) float64
     hop{h}_energies    (n_channels, dim) float64
     hop{h}_selected    (n_selected,) int64
+    pca_components     (k, n_full) float32   only for models fitted with n_components
+    pca_variance       (k,) float64
+    pca_mean           (n_full,) float64
 """
 
 from __future__ import annotations
@@ -27,9 +31,10 @@ if TYPE_CHECKING:
     from .rpointhop import RPointHopTransformer
 
 FORMAT_NAME = "o3d-rpointhop-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
-# Parameters stored in a model file (n_jobs is a property of the machine, not the model).
+# Parameters stored in a model file (n_jobs and progress belong to the machine and the
+# user, not to the model).
 _STORED_PARAMS = (
     "n_neighbors",
     "hop_sizes",
@@ -37,6 +42,8 @@ _STORED_PARAMS = (
     "energy_threshold",
     "scale",
     "fit_subsample",
+    "sampling",
+    "n_components",
     "random_state",
 )
 
@@ -58,7 +65,7 @@ def save_model(model: RPointHopTransformer, path: str | PathLike) -> None:
         "library_version": __version__,
         "params": params,
         "n_hops": len(model.kernels_),
-        "n_features_out": int(model.n_features_out_),
+        "n_features_out": int(model.selected_[-1].size),
         "n_training_clouds": int(model.n_training_clouds_),
     }
     arrays = {"metadata": np.array(json.dumps(meta))}
@@ -67,6 +74,11 @@ def save_model(model: RPointHopTransformer, path: str | PathLike) -> None:
         arrays[f"hop{h}_means"] = np.asarray(model.means_[h], dtype=np.float64)
         arrays[f"hop{h}_energies"] = np.asarray(model.energies_[h], dtype=np.float64)
         arrays[f"hop{h}_selected"] = np.asarray(model.selected_[h], dtype=np.int64)
+    if getattr(model, "components_", None) is not None:
+        # float32 axes: ample for a projection whose output is float32, half the file.
+        arrays["pca_components"] = np.asarray(model.components_, dtype=np.float32)
+        arrays["pca_variance"] = np.asarray(model.explained_variance_, dtype=np.float64)
+        arrays["pca_mean"] = np.asarray(model.pca_mean_, dtype=np.float64)
     np.savez_compressed(path, **arrays)
 
 
@@ -156,7 +168,24 @@ def _from_arrays(cls, path, archive) -> RPointHopTransformer:
         energies,
         selected,
     )
+    model.components_ = model.explained_variance_ = model.pca_mean_ = None
+    if "pca_components" in archive.files:
+        axes, variance, mean = (
+            _entry(path, archive, key) for key in ("pca_components", "pca_variance", "pca_mean")
+        )
+        if (
+            axes.ndim != 2
+            or axes.shape[1] != n_channels
+            or variance.shape != (len(axes),)
+            or (mean.shape != (n_channels,))
+        ):
+            raise _invalid(path, "its principal axes do not match the last hop")
+        if not all(np.isfinite(a).all() for a in (axes, variance, mean)):
+            raise _invalid(path, "its principal axes hold non-finite values")
+        model.components_ = axes.astype(np.float64)
+        model.explained_variance_ = variance.astype(np.float64)
+        model.pca_mean_ = mean.astype(np.float64)
     model.n_features_in_ = 3
-    model.n_features_out_ = n_channels
     model.n_training_clouds_ = int(meta.get("n_training_clouds", 0))
+    model._projection()  # n_components within the stored axes
     return model

@@ -14,6 +14,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from ._hops import CloudGeometry, HopConfig, build_geometry, is_int
+from ._progress import progress_bar
 from ._saab import MomentAccumulator, apply_saab, fit_saab
 from ._validation import as_cloud_list, describe_each
 
@@ -69,19 +70,37 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
     fit_subsample : int, default=None
         If set, ``fit`` draws at most this many points of each training cloud at random
         (e.g. 1024 of ModelNet40's 2048, as in the paper). ``transform`` never subsamples.
+    sampling : {"auto", "fps", "poisson"}, default="auto"
+        How each hop's sample is drawn. ``"fps"``: farthest point sampling from the
+        point farthest from the centroid (the paper's choice; its cost grows with the
+        square of the cloud). ``"poisson"``: a rigid-invariant Poisson-disk subsample
+        in ``O(n log n)`` (see ``docs/algorithm.md``). ``"auto"``: FPS up to 16384
+        points, Poisson disks above.
+    n_components : int, default=None
+        If set, descriptors are projected on their ``n_components`` principal axes,
+        learned by ``fit`` from the training descriptors (a PCA without whitening
+        folded into the last hop): a short descriptor that Open3D's k-d tree matches
+        fast and that keeps a million-point cloud's descriptors small. A model fitted
+        with ``n_components=K`` also serves any smaller value set later.
+    progress : bool, default=None
+        Show a progress bar on stderr (``tqdm``) for long fits and transforms. ``None``:
+        only when stderr is a terminal and the job is large.
     n_jobs : int, default=None
-        Number of processes over clouds (``fit``, and ``transform`` of several clouds).
-        ``None`` means 1 and ``-1`` all cores.
+        Parallel workers: processes over clouds (``fit``, and ``transform`` of several
+        clouds), threads over blocks of points when transforming one cloud. ``None``
+        means 1 and ``-1`` all cores. Honoured by joblib's ``parallel_config``, so a
+        Dask cluster can run it.
     random_state : int, RandomState instance or None, default=None
-        Seeds ``fit_subsample``. Everything else is deterministic: sampling starts at the
-        point farthest from the centroid, so it moves with the cloud.
+        Seeds ``fit_subsample``. Everything else is deterministic: sampling depends on
+        the geometry only, so it moves with the cloud.
 
     Attributes
     ----------
     n_features_in_ : int
         Always 3 (x, y, z).
     n_features_out_ : int
-        Length of a descriptor.
+        Length of a descriptor: ``n_components`` if set, else every output of the last
+        hop.
     kernels_ : list of ndarray of shape (n_channels, dim, dim)
         Saab kernels of each hop (hop 1: one 24-D channel; later hops: one 8-D channel per
         channel passed on). Column 0 is the DC kernel.
@@ -97,6 +116,13 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         to the next hop, or, for the last hop, of the descriptor's components.
     n_training_clouds_ : int
         Number of clouds the model was fitted on.
+    components_ : ndarray of shape (n_fitted_components, n_full_features) or None
+        Principal axes of the training descriptors (``None`` if fitted without
+        ``n_components``), by decreasing variance.
+    explained_variance_ : ndarray of shape (n_fitted_components,) or None
+        Variance of the training descriptors along each axis.
+    pca_mean_ : ndarray of shape (n_full_features,) or None
+        Mean of the training descriptors, subtracted before projecting.
 
     See Also
     --------
@@ -129,6 +155,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         energy_threshold: float = 1e-3,
         scale: str | float = "auto",
         fit_subsample: int | None = None,
+        sampling: str = "auto",
+        n_components: int | None = None,
+        progress: bool | None = None,
         n_jobs: int | None = None,
         random_state: int | np.random.RandomState | None = None,
     ) -> None:
@@ -138,6 +167,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         self.energy_threshold = energy_threshold
         self.scale = scale
         self.fit_subsample = fit_subsample
+        self.sampling = sampling
+        self.n_components = n_components
+        self.progress = progress
         self.n_jobs = n_jobs
         self.random_state = random_state
 
@@ -145,7 +177,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
     def _hop_config(self) -> HopConfig:
         """Validate every parameter; return the ones that shape the hops."""
         config = HopConfig.from_params(
-            self.n_neighbors, self.hop_sizes, self.lrf_neighbors, self.scale
+            self.n_neighbors, self.hop_sizes, self.lrf_neighbors, self.scale, self.sampling
         )
         if not (
             isinstance(self.energy_threshold, numbers.Real) and 0.0 <= self.energy_threshold < 1.0
@@ -155,6 +187,12 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             raise ValueError(
                 f"fit_subsample must be None or a positive int, got {self.fit_subsample!r}"
             )
+        if self.n_components is not None and not is_int(self.n_components, 1):
+            raise ValueError(
+                f"n_components must be None or a positive int, got {self.n_components!r}"
+            )
+        if self.progress not in (None, True, False):
+            raise ValueError(f"progress must be None, True or False, got {self.progress!r}")
         return config
 
     def _check_sizes(self, clouds: list[np.ndarray], config: HopConfig, kind: str) -> None:
@@ -200,6 +238,10 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         self.n_training_clouds_ = len(clouds)
         return self
 
+    def _bar(self, total: int, unit: str, large: bool, desc: str):
+        """A tqdm bar on stderr, or None (see the ``progress`` parameter)."""
+        return progress_bar(total, desc=desc, unit=unit, enabled=self.progress, large=large)
+
     def _geometry_batches(
         self, clouds: list[np.ndarray], config: HopConfig, cache: dict[int, CloudGeometry]
     ):
@@ -223,27 +265,84 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
 
         Clouds whose structure and current features fit in ``_FIT_CACHE_BYTES`` are kept
         in memory between hops; the others are recomputed from scratch in every pass.
+        With ``n_components``, one more pass gathers the covariance of the descriptors.
         """
         n_hops = config.n_hops
         self.kernels_, self.means_, self.energies_, self.selected_ = [], [], [], []
+        self.components_ = self.explained_variance_ = self.pca_mean_ = None
         cache: dict[int, CloudGeometry] = {}
         features: dict[int, np.ndarray] = {}  # current hop's output of the cached clouds
         used = 0
         parent_energy = np.ones(1)
-        for hop in range(n_hops):
-            moments = MomentAccumulator(len(parent_energy), 24 if hop == 0 else 8)
+        passes = n_hops + (self.n_components is not None)
+        bar = self._bar(passes * len(clouds), "cloud", len(clouds) >= 200, "fit")
+        for hop in range(passes):
+            pca = hop == n_hops
+            moments = (
+                MomentAccumulator(1, self.selected_[-1].size)
+                if pca
+                else MomentAccumulator(len(parent_energy), 24 if hop == 0 else 8)
+            )
             for i, geometry in self._geometry_batches(clouds, config, cache):
                 # Room for the structure and, later, the features it produces.
                 if hop == 0 and used + 2 * geometry.nbytes <= _FIT_CACHE_BYTES:
                     cache[i] = geometry
                     used += 2 * geometry.nbytes
-                previous = features.get(i) if i in cache else self._forward(geometry, hop)
-                moments.update(self._hop_inputs(hop, geometry, previous))
+                if pca:
+                    previous = features.get(i) if i in cache else self._forward(geometry, hop - 1)
+                    moments.update(self._hop(hop - 1, geometry, previous)[None])
+                else:
+                    previous = features.get(i) if i in cache else self._forward(geometry, hop)
+                    moments.update(self._hop_inputs(hop, geometry, previous))
+                if bar is not None:
+                    bar.update(1)
+            if pca:
+                self._add_pca(moments)
+                break
             parent_energy = self._add_hop(moments, parent_energy, last=hop == n_hops - 1)
             if hop < n_hops - 1:
                 for i, geometry in cache.items():
                     features[i] = self._hop(hop, geometry, features.get(i))
-        self.n_features_out_ = int(self.selected_[-1].size)
+        if bar is not None:
+            bar.close()
+
+    def _add_pca(self, moments: MomentAccumulator) -> None:
+        """Principal axes of the descriptors (the last hop's outputs)."""
+        n_full = self.selected_[-1].size
+        if self.n_components > n_full:
+            raise ValueError(
+                f"n_components={self.n_components} exceeds the {n_full} outputs of the last "
+                "hop; choose at most that many"
+            )
+        variance, axes = np.linalg.eigh(moments.covariance()[0])
+        order = np.argsort(variance, kind="stable")[::-1][: self.n_components]
+        axes = axes[:, order].T  # (k, n_full)
+        # Sign fix, as for the Saab kernels: the largest-magnitude weight is positive.
+        pivot = axes[np.arange(len(axes)), np.abs(axes).argmax(axis=1)]
+        axes *= np.where(pivot < 0, -1.0, 1.0)[:, None]
+        self.components_ = axes
+        self.explained_variance_ = np.clip(variance[order], 0.0, None)
+        self.pca_mean_ = moments.mean[0].copy()
+
+    @property
+    def n_features_out_(self) -> int:
+        check_is_fitted(self, "kernels_")
+        n_full = int(self.selected_[-1].size)
+        return n_full if self.n_components is None else int(self.n_components)
+
+    def _projection(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(mean, axes.T)`` in float64 for the current ``n_components``, or None."""
+        if self.n_components is None:
+            return None
+        stored = 0 if getattr(self, "components_", None) is None else len(self.components_)
+        if self.n_components > stored:
+            raise ValueError(
+                f"n_components={self.n_components}, but this model was fitted with "
+                f"{'no' if not stored else stored} principal axes; refit with "
+                f"n_components={self.n_components} (or set a smaller value)"
+            )
+        axes = np.ascontiguousarray(self.components_[: self.n_components].T, dtype=np.float64)
+        return self.pca_mean_, axes
 
     def _add_hop(
         self, moments: MomentAccumulator, parent_energy: np.ndarray, last: bool
@@ -287,8 +386,14 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             return out.reshape(-1, out.shape[2])[selected]
         pooling = geometry.poolings[hop - 1]
         out = np.empty((selected.size, pooling.n_queries), dtype=np.float32)
-        pooling.map_blocks(previous, self._block_writer(hop, out, transposed=False))
+        pooling.map_blocks(
+            previous, self._block_writer(hop, out, transposed=False), self._threads()
+        )
         return out
+
+    def _threads(self) -> int:
+        """Threads over blocks of one cloud's points (``n_jobs``)."""
+        return max(1, effective_n_jobs(self.n_jobs))
 
     def _forward(self, geometry: CloudGeometry, n_hops: int | None = None) -> np.ndarray:
         """Run the first ``n_hops`` fitted hops (all by default) on a cloud's geometry;
@@ -299,10 +404,10 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             feats = self._hop(hop, geometry, feats)
         return feats
 
-    def _block_writer(self, hop: int, out: np.ndarray, transposed: bool):
+    def _block_writer(self, hop: int, out: np.ndarray, transposed: bool, projection=None, bar=None):
         """A ``consume`` for :meth:`OctantPooling.map_blocks`: Saab-transform a block and
         store its selected outputs in ``out[:, start:stop]`` (or, ``transposed``, in rows
-        ``out[start:stop]``)."""
+        ``out[start:stop]``, projected on ``projection = (mean, axes)`` if given)."""
         kernels, means, selected = self.kernels_[hop], self.means_[hop], self.selected_[hop]
         keep_all = selected.size == kernels.shape[0] * kernels.shape[2]
 
@@ -310,10 +415,19 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             block = apply_saab(attrs, kernels, means).reshape(-1, stop - start)
             if not keep_all:
                 block = block[selected]
-            if transposed:
+            if projection is not None:
+                # A BLAS product rounds a row by where it sits in the kernel's tiles. In
+                # float64 that is far below float32's resolution, so once rounded to
+                # float32 the rows come out the same wherever they sit: permuting the
+                # cloud permutes the result (measured: no difference in 320k values).
+                mean, axes = projection
+                out[start:stop] = (block.T - mean) @ axes
+            elif transposed:
                 out[start:stop] = block.T
             else:
                 out[:, start:stop] = block
+            if bar is not None:
+                bar.update(stop - start)
 
         return write
 
@@ -321,15 +435,21 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         """One row per point. The last hop is evaluated block by block, each block's
         outputs transposed into their rows while still in cache (one transposed copy of
         the whole result would cost about a quarter of the transform)."""
+        projection = self._projection()
+        bar = self._bar(len(points), "pt", len(points) >= 100_000, "describe")
         geometry = build_geometry(points, config, for_fit=False)
         last = len(self.kernels_) - 1
         if last == 0:
-            return np.ascontiguousarray(self._forward(geometry).T)
-        previous = self._forward(geometry, last)
-        out = np.empty((geometry.n_points, self.n_features_out_), dtype=np.float32)
-        geometry.poolings[last - 1].map_blocks(
-            previous, self._block_writer(last, out, transposed=True)
-        )
+            out = np.ascontiguousarray(self._forward(geometry).T)
+            if projection is not None:
+                out = ((out - projection[0]) @ projection[1]).astype(np.float32)
+        else:
+            previous = self._forward(geometry, last)
+            out = np.empty((geometry.n_points, self.n_features_out_), dtype=np.float32)
+            writer = self._block_writer(last, out, True, projection, bar)
+            geometry.poolings[last - 1].map_blocks(previous, writer, self._threads())
+        if bar is not None:
+            bar.close()
         return out
 
     # ------------------------------------------------------------------ transform
@@ -350,6 +470,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         """
         check_is_fitted(self, "kernels_")
         config = self._hop_config()
+        self._projection()  # n_components against the fitted axes, before any work
         clouds, kind = as_cloud_list(X)
         self._check_sizes(clouds, config, kind)
         return describe_each(self._describe, clouds, kind, self.n_jobs, [config] * len(clouds))
@@ -379,7 +500,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         save_model(self, path)
 
     @classmethod
-    def pretrained(cls, name: str = "modelnet40") -> RPointHopTransformer:
+    def pretrained(
+        cls, name: str = "modelnet40", *, n_components: int | None = None
+    ) -> RPointHopTransformer:
         """The model shipped with the package, ready to transform.
 
         Parameters
@@ -387,6 +510,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         name : {"modelnet40"}
             ``"modelnet40"``: paper object settings, fitted on a ModelNet40 train subset
             (144 shapes, 1024 random points each); see ``docs/model_card.md``.
+        n_components : int, default=None
+            ``None``: the full descriptor (1624-D). An int up to 128: the descriptor's
+            projection on that many principal axes, fitted on the same training data.
 
         Returns
         -------
@@ -399,7 +525,10 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         if name not in models:
             raise ValueError(f"unknown pretrained model {name!r}; available: {sorted(models)}")
         with as_file(files("o3d_rpointhop") / "data" / models[name]) as path:
-            return cls.load(path)
+            model = cls.load(path)
+        model.set_params(n_components=n_components)
+        model._projection()  # a clear error for more axes than the file holds
+        return model
 
     @classmethod
     def load(cls, path: str | PathLike) -> RPointHopTransformer:
