@@ -37,10 +37,13 @@ def _sizes(text: str) -> tuple[float | int, ...]:
     return tuple(values)
 
 
-def _load_model(path: str | None):
+def _load_model(path: str | None, n_components: int | None = None):
+    """A model file, else the pretrained model (full, or on ``n_components`` axes)."""
     from .rpointhop import RPointHopTransformer
 
-    return RPointHopTransformer.pretrained() if path is None else RPointHopTransformer.load(path)
+    if path is None:
+        return RPointHopTransformer.pretrained(n_components=n_components)
+    return RPointHopTransformer.load(path)
 
 
 # --------------------------------------------------------------------------- commands
@@ -76,7 +79,9 @@ def cmd_describe(args: argparse.Namespace) -> int:
     from .io import read_cloud
 
     cloud = read_cloud(args.cloud)
-    model = _load_model(args.model)
+    model = _load_model(args.model, args.n_components)
+    if args.model and args.n_components is not None:
+        model.set_params(n_components=args.n_components)
     start = time.perf_counter()
     desc = model.transform(cloud)
     np.save(args.output, np.ascontiguousarray(desc))
@@ -176,9 +181,10 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
         run_modelnet40,
         write_report,
     )
+    from .rpointhop import default_descriptor
 
     methods = args.methods.split(",") if args.methods else list(METHODS)
-    model = _load_model(args.model)
+    model = _load_model(args.model) if args.model else default_descriptor()
     common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
     if args.dataset == "modelnet40":
         protocols = args.protocol or list(MODELNET40_PROTOCOLS)
@@ -367,6 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("cloud")
     p.add_argument("-o", "--output", required=True, help="descriptor file to write (.npy)")
     p.add_argument("--model", help="model file written by 'fit' (default: the pretrained model)")
+    p.add_argument(
+        "--n-components",
+        type=int,
+        help="project the descriptors on this many principal axes (pretrained: up to 128)",
+    )
     p.set_defaults(func=cmd_describe)
     return parser
 

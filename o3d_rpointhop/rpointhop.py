@@ -18,7 +18,13 @@ from ._progress import progress_bar
 from ._saab import MomentAccumulator, apply_saab, fit_saab
 from ._validation import as_cloud_list, describe_each
 
-__all__ = ["RPointHopTransformer"]
+__all__ = ["RPointHopTransformer", "default_descriptor", "REGISTRATION_COMPONENTS"]
+
+#: Principal axes of the descriptor that registration uses by default. Chosen on
+#: resampled pairs of ModelNet40 *training* shapes: 64 axes match better than the full
+#: 1624-D descriptor (9.2 % against 8.5 % correct nearest descriptors; 32 axes: 8.4 %),
+#: and make matching and RANSAC several times cheaper.
+REGISTRATION_COMPONENTS = 64
 
 # Fitting keeps each cloud's hop structure and current features in memory while their
 # total stays under this many bytes (about 2 MB per 1024-point cloud); the clouds beyond
@@ -543,3 +549,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         from ._persistence import load_model
 
         return load_model(cls, path)
+
+
+def default_descriptor() -> RPointHopTransformer:
+    """The descriptor ``register()``, the CLI and the benchmarks use when given none: the
+    pretrained ModelNet40 model projected on :data:`REGISTRATION_COMPONENTS` axes."""
+    return RPointHopTransformer.pretrained(n_components=REGISTRATION_COMPONENTS)

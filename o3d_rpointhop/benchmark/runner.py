@@ -13,7 +13,7 @@ import numpy as np
 
 from ..open3d_interop import to_point_cloud
 from ..registration.context import resolve_voxel_size
-from ..rpointhop import RPointHopTransformer
+from ..rpointhop import RPointHopTransformer, default_descriptor
 from ..transforms import rotation_error_deg, translation_error
 from .methods import METHODS, run_method
 from .metrics import is_symmetry, match_inlier_ratio, pair_errors, rmse_3dmatch, summarize
@@ -169,7 +169,7 @@ def run_modelnet40(
     methods = _check_methods(methods)
     train = load_modelnet40("train", data)
     test = load_modelnet40("test", data)
-    model = model if model is not None else RPointHopTransformer.pretrained()
+    model = model if model is not None else default_descriptor()
     out = {
         "dataset": "modelnet40",
         "source": test.source,
@@ -244,7 +244,7 @@ def run_bunny(
     from .protocols import Pair
 
     methods = _check_methods(methods)
-    model = model if model is not None else RPointHopTransformer.pretrained()
+    model = model if model is not None else default_descriptor()
     scans = load_bunny(BUNNY_SCANS, data)
     out = {
         "dataset": "bunny",
@@ -311,7 +311,7 @@ def run_3dmatch(
     from ..registration.context import RegistrationContext
 
     methods = _check_methods(methods)
-    model = model if model is not None else RPointHopTransformer.pretrained()
+    model = model if model is not None else default_descriptor()
     pairs = load_3dmatch_pairs(data)
     out = {
         "dataset": "3dmatch",
