@@ -44,6 +44,8 @@ def as_points(X: Any, name: str = "X", min_points: int = 1) -> np.ndarray:
     Returns
     -------
     points : ndarray of shape (n_points, 3), dtype float64
+        C-contiguous, writeable, in a buffer format Open3D accepts: ``X`` itself when it
+        already is such an array (so callers must not write to it), else one copy.
 
     Raises
     ------
@@ -90,6 +92,11 @@ def as_points(X: Any, name: str = "X", min_points: int = 1) -> np.ndarray:
     if n < min_points:
         raise ValueError(f"{name} has {n} points; at least {min_points} are needed")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not arr.flags.writeable or memoryview(arr).format != "d":
+        # Read-only and memory-mapped arrays, and arrays rebuilt from pickle buffers
+        # (joblib's Dask backend: format "=d"), which Open3D's converters refuse: one
+        # copy, and the caller's array is never written to.
+        arr = arr.copy()
     finite = np.isfinite(arr).all(axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
@@ -140,17 +147,28 @@ def as_cloud_list(X: Any, name: str = "X") -> tuple[list[np.ndarray], str]:
 def describe_each(describe, clouds: list, kind: str, n_jobs: int | None, *per_cloud: list):
     """Apply ``describe(cloud, *extras)`` to every cloud and answer in the input's form.
 
-    One cloud runs in this process; several run in ``n_jobs`` joblib processes. The
-    result is one array for ``kind="single"``, a stacked 3-D array for ``"batch"`` and a
-    list for ``"list"`` (see :func:`as_cloud_list`).
+    ``describe`` is an estimator's bound method. One cloud runs in this process; several
+    run as ``n_jobs`` joblib tasks (see :func:`o3d_rpointhop.batch.parallel_map`), each on
+    a one-thread copy of the estimator, with a progress bar when the estimator's
+    ``progress`` asks for one. The result is one array for ``kind="single"``, a stacked
+    3-D array for ``"batch"`` and a list for ``"list"`` (see :func:`as_cloud_list`).
     """
-    from joblib import Parallel, delayed
+    from .batch import _single_threaded, parallel_map
 
     args = list(zip(clouds, *per_cloud, strict=True))
     if len(args) == 1:
         out = [describe(*args[0])]
     else:
-        out = Parallel(n_jobs=n_jobs)(delayed(describe)(*a) for a in args)
+        owner = describe.__self__
+        worker = getattr(_single_threaded(owner), describe.__name__)
+        out = parallel_map(
+            worker,
+            args,
+            n_jobs=n_jobs,
+            progress=getattr(owner, "progress", False),
+            desc="describe",
+            unit="cloud",
+        )
     if kind == "single":
         return out[0]
     if kind == "batch":

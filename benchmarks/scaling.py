@@ -1,0 +1,176 @@
+"""Descriptor time and peak memory from 2k to 1M points: R-PointHop against Open3D FPFH.
+
+Every measurement runs in a fresh process (so its peak resident memory is its own),
+interleaved R-PointHop / FPFH on the same cloud. The cloud is a synthetic CAD-like
+object (``make_object``) sampled at each size. FPFH runs at its full-cost setting:
+normals within 6x and histograms within 15x the point spacing, at most 30 and 100
+neighbours (Open3D, all cores). R-PointHop is the pretrained model projected on 32
+principal axes (``pretrained(n_components=32)``), on all cores (``n_jobs=-1``); the
+full 1624-D descriptor is measured too up to 200k points (at 1M its float32 output
+alone is 6.5 GB).
+
+Usage: python benchmarks/scaling.py [--sizes 2000 20000 200000 1000000] [--output DIR]
+Writes DIR/scaling.json, DIR/scaling.md and DIR/scaling.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+METHODS = {
+    "rpointhop-32": "R-PointHop, pretrained, 32 principal axes, n_jobs=-1",
+    "rpointhop-full": "R-PointHop, pretrained, 1624-D, n_jobs=-1",
+    "fpfh": "Open3D FPFH, normals 6x / histograms 15x the spacing, 30 / 100 neighbours",
+}
+FULL_MAX_POINTS = 200_000
+
+
+def peak_rss_mb() -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    raise RuntimeError("no VmHWM in /proc/self/status")
+
+
+def child(method: str, n: int, repeats: int) -> None:
+    """Run in a fresh process: describe the cloud ``repeats`` times, print JSON."""
+    import numpy as np
+    import open3d as o3d
+
+    from o3d_rpointhop import RPointHopTransformer
+    from o3d_rpointhop.datasets import make_object
+    from o3d_rpointhop.fpfh import point_spacing
+
+    points = make_object(n, shape_seed=3, sample_seed=n)
+    spacing = point_spacing(points)
+    if method == "fpfh":
+        search = o3d.geometry.KDTreeSearchParamHybrid
+
+        def run():
+            cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+            cloud.estimate_normals(search(radius=6 * spacing, max_nn=30))
+            feature = o3d.pipelines.registration.compute_fpfh_feature(
+                cloud, search(radius=15 * spacing, max_nn=100)
+            )
+            return np.asarray(feature.data).shape[::-1]
+
+    else:
+        k = 32 if method == "rpointhop-32" else None
+        model = RPointHopTransformer.pretrained(n_components=k).set_params(n_jobs=-1)
+
+        def run():
+            return model.transform(points).shape
+
+    before = peak_rss_mb()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        shape = run()
+        times.append(time.perf_counter() - start)
+    print(
+        json.dumps(
+            {
+                "method": method,
+                "points": n,
+                "seconds": float(np.median(times)),
+                "repeats": repeats,
+                "peak_rss_mb": peak_rss_mb(),
+                "rss_before_mb": before,
+                "output_shape": list(shape),
+            }
+        )
+    )
+
+
+def measure(method: str, n: int, repeats: int) -> dict:
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", method, str(n), str(repeats)],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def markdown(rows: list[dict], sizes: list[int]) -> str:
+    by = {(r["method"], r["points"]): r for r in rows}
+    lines = [
+        "| points | R-PointHop (32 axes) s | FPFH s | time ratio | R-PointHop peak MB | "
+        "FPFH peak MB | R-PointHop 1624-D s | 1624-D peak MB |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for n in sizes:
+        r, f, full = by.get(("rpointhop-32", n)), by.get(("fpfh", n)), by.get(("rpointhop-full", n))
+        lines.append(
+            f"| {n:,} | {r['seconds']:.2f} | {f['seconds']:.2f} | "
+            f"**{r['seconds'] / f['seconds']:.2f}** | {r['peak_rss_mb']:.0f} | "
+            f"{f['peak_rss_mb']:.0f} | "
+            + (f"{full['seconds']:.2f} | {full['peak_rss_mb']:.0f} |" if full else "- | - |")
+        )
+    return "\n".join(lines) + "\n"
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 4))
+    for ax, key, label in zip(
+        fig.subplots(1, 2), ("seconds", "peak_rss_mb"), ("seconds", "peak memory (MB)"), strict=True
+    ):
+        for method, name in METHODS.items():
+            pts = sorted((r["points"], r[key]) for r in rows if r["method"] == method)
+            if pts:
+                ax.loglog(*zip(*pts, strict=True), marker="o", label=name)
+        ax.set_xlabel("points")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    fig.axes[0].legend(fontsize=7)
+    fig.suptitle("Descriptor cost against cloud size (log-log)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[2000, 20000, 200000, 1000000])
+    parser.add_argument("--output", default=str(RESULTS))
+    parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        child(args.child[0], int(args.child[1]), int(args.child[2]))
+        return
+    rows = []
+    for n in args.sizes:
+        repeats = 5 if n <= 20_000 else 1
+        for method in METHODS:
+            if method == "rpointhop-full" and n > FULL_MAX_POINTS:
+                continue
+            rows.append(measure(method, n, repeats))
+            print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+    folder = Path(args.output)
+    folder.mkdir(parents=True, exist_ok=True)
+    import open3d
+
+    result = {
+        "machine": f"{platform.machine()}, {len(__import__('os').sched_getaffinity(0))} cores",
+        "python": platform.python_version(),
+        "open3d": open3d.__version__,
+        "methods": METHODS,
+        "rows": rows,
+    }
+    (folder / "scaling.json").write_text(json.dumps(result, indent=1))
+    (folder / "scaling.md").write_text(markdown(rows, args.sizes))
+    plot(rows, folder / "scaling.png")
+    print(markdown(rows, args.sizes))
+
+
+if __name__ == "__main__":
+    main()
