@@ -273,8 +273,12 @@ def test_realistic_pair_global_then_icp(model):
     result = register(source, target, model)
     assert_close_pose(result.transformation, truth, 2.0, 0.02)
     assert [s.name for s in result.steps] == ["global", "refine"]
-    assert result.fitness > 0.4 and 0 < result.inlier_rmse < result.voxel_size
-    assert all(s.seconds > 0 for s in result.steps) and result.seconds > 0
+    # One fitness, Open3D's: the last step's, at its correspondence distance (half the
+    # resolution: two different samples of a surface meet at that distance only in part).
+    assert result.distance == result.steps[-1].distance == pytest.approx(0.5 * result.voxel_size)
+    assert result.fitness == pytest.approx(result.steps[-1].fitness)
+    assert result.fitness > 0.1 and 0 < result.inlier_rmse < result.distance
+    assert result.converged and not result.ambiguous
     assert result.correspondences.shape[1] == 2 and len(result.correspondences) > 100
     summary = result.as_dict()
     assert summary["steps"][0]["name"] == "global" and len(summary["transformation"]) == 4
@@ -391,8 +395,9 @@ def test_documented_open3d_recipes_run_silently_and_register(capfd):
     truth = np.eye(4)
     truth[:3, :3] = np.diag([1.0, -1.0, -1.0])
     truth[:3, 3] = [-0.3, 0.3, 0.3]
-    # Global estimates on 0.05-voxel clouds (Open3D's RANSAC runs on several threads,
-    # so the exact answer varies from run to run); ICP does the rest.
-    for found in (first, second):
-        assert rotation_error_deg(found, truth) < 10.0
-        assert np.linalg.norm(found[:3, 3] - truth[:3, 3]) < 0.1
+    # The first recipe ends with ICP; the second is a global estimate on 0.05-voxel
+    # clouds (Open3D's RANSAC runs on several threads, so it varies from run to run).
+    assert rotation_error_deg(first, truth) < 2.0
+    assert np.linalg.norm(first[:3, 3] - truth[:3, 3]) < 0.02
+    assert rotation_error_deg(second, truth) < 20.0
+    assert np.linalg.norm(second[:3, 3] - truth[:3, 3]) < 0.15

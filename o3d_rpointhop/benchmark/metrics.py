@@ -105,5 +105,5 @@ def match_inlier_ratio(context, descriptor, truth: np.ndarray, radius: float = 0
     corr = find_correspondences(
         context.features(descriptor, "source"), context.features(descriptor, "target"), mutual=True
     )
-    moved = apply_transform(src[corr.pairs[:, 0]], truth)
+    moved = apply_transform(src[corr.pairs[:, 0]], context.to_local(truth))
     return float((np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < radius).mean())

@@ -1,6 +1,6 @@
 """Registration: global estimates from descriptors, then ICP refinement chains."""
 
-from .context import RegistrationContext
+from .context import RegistrationContext, RegistrationWarning
 from .pipeline import RegistrationPipeline, RegistrationResult, register
 from .steps import (
     FGRGlobal,
@@ -26,6 +26,7 @@ __all__ = [
     "RegistrationPipeline",
     "RegistrationResult",
     "RegistrationStep",
+    "RegistrationWarning",
     "SVDGlobal",
     "StepResult",
     "SymmetryCheck",

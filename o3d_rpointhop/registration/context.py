@@ -1,8 +1,15 @@
-"""What the steps of one registration share: the clouds, their resolution, and caches."""
+"""What the steps of one registration share: the clouds, their resolution, and caches.
+
+The context works in a frame centred on the target's centroid: survey, LiDAR and
+photogrammetry clouds sit millions of units from the origin, where ICP's normal
+equations and float32 scoring lose every digit that matters. The steps see centred
+clouds; :meth:`RegistrationContext.to_world` maps their transformations back.
+"""
 
 from __future__ import annotations
 
 import numbers
+import warnings
 from typing import Any
 
 import numpy as np
@@ -11,7 +18,76 @@ import open3d as o3d
 from ..fpfh import point_spacing
 from ..open3d_interop import to_point_cloud
 
-__all__ = ["RegistrationContext", "resolve_voxel_size"]
+__all__ = ["RegistrationContext", "RegistrationWarning", "resolve_voxel_size"]
+
+# A cloud whose second principal extent is below this share of its first is a line, and
+# whose third is below it, a plane (relative standard deviations).
+_COLLINEAR = 1e-6
+_PLANAR = 1e-4
+# float32 coordinates whose rounding step exceeds this share of the cloud's extent.
+_FLOAT32_RESOLUTION = 1e-5
+
+
+class RegistrationWarning(UserWarning):
+    """A registration result to treat with care: degenerate input, or a flagged result."""
+
+
+def _raw_float32(cloud: Any) -> np.ndarray | None:
+    """The caller's coordinates when they are float32 (numpy or tensor Open3D)."""
+    if isinstance(cloud, np.ndarray) and cloud.dtype == np.float32:
+        return cloud
+    point = getattr(cloud, "point", None)
+    if point is not None and "positions" in point:
+        positions = point.positions
+        if "Float32" in str(positions.dtype):
+            return positions.cpu().numpy()
+    return None
+
+
+def check_geometry(points: np.ndarray, name: str, raw: Any = None) -> None:
+    """Refuse clouds a rigid registration cannot be defined on, warn about risky ones.
+
+    Raises
+    ------
+    ValueError
+        If every point coincides, or the points lie on one line (a rotation about it
+        cannot be recovered).
+
+    Warns
+    -----
+    RegistrationWarning
+        For a planar cloud (in-plane turns and flips may be undetermined; see
+        ``RegistrationResult.ambiguous``), and for float32 coordinates whose rounding
+        step is coarse for the cloud's size (survey coordinates: pass float64).
+    """
+    spread = np.sqrt(np.clip(np.linalg.eigvalsh(np.cov(points.T)), 0.0, None))[::-1]
+    if spread[0] == 0.0:
+        raise ValueError(f"{name} has no spatial extent: all its points coincide")
+    if spread[1] <= _COLLINEAR * spread[0]:
+        raise ValueError(
+            f"{name} is collinear (its points lie on one line): a rotation about that line "
+            "cannot be recovered, so there is no rigid registration to find"
+        )
+    if spread[2] <= _PLANAR * spread[0]:
+        warnings.warn(
+            f"{name} is planar (flat to {spread[2] / spread[0]:.1e} of its size): turns "
+            "within the plane and flips may be undetermined; check result.ambiguous",
+            RegistrationWarning,
+            stacklevel=4,
+        )
+    raw32 = _raw_float32(raw)
+    if raw32 is not None:
+        step = float(np.spacing(np.float32(np.abs(raw32).max())))
+        extent = float(points.max(axis=0).max() - points.min(axis=0).min())
+        if step > _FLOAT32_RESOLUTION * extent:
+            warnings.warn(
+                f"{name} holds float32 coordinates up to {np.abs(raw32).max():.6g}, where "
+                f"float32 resolves only {step:.3g}, coarse for a cloud {extent:.3g} across: "
+                "its points were already rounded before registration; pass float64 "
+                "(or coordinates relative to a local origin) for full precision",
+                RegistrationWarning,
+                stacklevel=4,
+            )
 
 
 def resolve_voxel_size(
@@ -71,6 +147,9 @@ class RegistrationContext:
         The resolution: thresholds of the steps are multiples of it unless given.
     downsampled : bool
         Whether the global step works on voxel-downsampled clouds.
+    origin : ndarray of shape (3,)
+        The caller's coordinates of the centred frame's origin (the target's centroid);
+        ``source`` and ``target`` are in the centred frame.
     """
 
     def __init__(
@@ -81,9 +160,16 @@ class RegistrationContext:
         n_global_points: int = 2048,
         seed: int = 0,
         descriptor: Any = None,
+        check: bool = True,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
+        self.origin = np.asarray(self.target.get_center(), dtype=np.float64)
+        self.source.translate(-self.origin)
+        self.target.translate(-self.origin)
+        if check:
+            check_geometry(np.asarray(self.source.points), "source", source)
+            check_geometry(np.asarray(self.target.points), "target", target)
         self.voxel_size, self.downsampled = resolve_voxel_size(
             self.source, self.target, voxel_size, n_global_points
         )
@@ -93,6 +179,18 @@ class RegistrationContext:
         self._features: dict[tuple[int, str], np.ndarray] = {}
         self._normals: dict[tuple, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
+
+    def to_world(self, transformation: np.ndarray) -> np.ndarray:
+        """A centred-frame transformation in the caller's coordinates."""
+        out = np.array(transformation, dtype=np.float64)
+        out[:3, 3] += self.origin - out[:3, :3] @ self.origin
+        return out
+
+    def to_local(self, transformation: np.ndarray) -> np.ndarray:
+        """A caller's transformation in the centred frame (inverse of :meth:`to_world`)."""
+        out = np.array(transformation, dtype=np.float64)
+        out[:3, 3] -= self.origin - out[:3, :3] @ self.origin
+        return out
 
     def cloud(self, which: str) -> o3d.geometry.PointCloud:
         """The full-resolution ``"source"`` or ``"target"``."""
@@ -119,7 +217,13 @@ class RegistrationContext:
                 voxel_size=self.voxel_size,
                 seed=self.seed,
                 descriptor=self.descriptor,
+                check=False,
             )
+            # The same frame as this context (its clouds are centred already, but their
+            # own centroid may differ slightly): transformations carry over unchanged.
+            self._coarse.source.translate(self._coarse.origin)
+            self._coarse.target.translate(self._coarse.origin)
+            self._coarse.origin = np.zeros(3)
         return self._coarse
 
     def features(self, descriptor: Any, which: str) -> np.ndarray:

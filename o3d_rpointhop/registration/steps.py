@@ -64,6 +64,8 @@ class StepResult:
     seconds : float
     info : dict
         Step-specific numbers (thresholds used, number of candidate matches, ...).
+    distance : float
+        The correspondence distance ``fitness`` and ``inlier_rmse`` were measured at.
     """
 
     name: str
@@ -73,6 +75,7 @@ class StepResult:
     correspondences: np.ndarray
     seconds: float = 0.0
     info: dict = field(default_factory=dict)
+    distance: float = 0.0
 
     def as_dict(self) -> dict:
         return {
@@ -82,6 +85,7 @@ class StepResult:
             "inlier_rmse": self.inlier_rmse,
             "n_correspondences": int(len(self.correspondences)),
             "seconds": self.seconds,
+            "distance": self.distance,
             "info": self.info,
         }
 
@@ -121,7 +125,7 @@ def repeatable_open3d():
         o3d.utility.set_max_threads(previous)
 
 
-def _from_open3d(name: str, result, seconds: float, info: dict) -> StepResult:
+def _from_open3d(name: str, result, seconds: float, info: dict, distance: float) -> StepResult:
     return StepResult(
         name=name,
         transformation=np.array(result.transformation),
@@ -130,6 +134,7 @@ def _from_open3d(name: str, result, seconds: float, info: dict) -> StepResult:
         correspondences=np.asarray(result.correspondence_set, dtype=np.int64).reshape(-1, 2),
         seconds=seconds,
         info=info,
+        distance=float(distance),
     )
 
 
@@ -145,7 +150,7 @@ def evaluate(
     )
     with repeatable_open3d():
         result = reg.evaluate_registration(source, target, threshold, transformation)
-    return _from_open3d("evaluation", result, 0.0, {"threshold": threshold})
+    return _from_open3d("evaluation", result, 0.0, {"threshold": threshold}, threshold)
 
 
 class RegistrationStep(BaseEstimator):
@@ -245,6 +250,7 @@ class SVDGlobal(_GlobalStep):
             correspondences=corr.pairs,
             seconds=time.perf_counter() - start,
             info={"matches_used": len(corr), "evaluation_threshold": context.voxel_size},
+            distance=context.voxel_size,
         )
 
 
@@ -558,7 +564,7 @@ class _ICPStep(RegistrationStep):
             result = self._solve(context, which, distance, current)
             current = np.array(result.transformation)
         info = {"distances": distances, "kernel": getattr(self, "kernel", None)}
-        return _from_open3d(self.name, result, time.perf_counter() - start, info)
+        return _from_open3d(self.name, result, time.perf_counter() - start, info, distances[-1])
 
 
 class PointToPointICP(_ICPStep):
@@ -730,7 +736,8 @@ class MultiScaleICP(RegistrationStep):
             result = self._run_scale(context, current, scale, iters)
             current = np.array(result.transformation)
         info = {"scales": scales, "method": self.method}
-        return _from_open3d("multiscale", result, time.perf_counter() - start, info)
+        last = self.distance_factor * scales[-1] * context.voxel_size
+        return _from_open3d("multiscale", result, time.perf_counter() - start, info, last)
 
     def _run_scale(self, context: RegistrationContext, current, scale: float, iters: int):
         """One ICP pass at ``scale`` x ``voxel_size``."""
