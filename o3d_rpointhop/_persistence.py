@@ -79,7 +79,9 @@ def save_model(model: RPointHopTransformer, path: str | PathLike) -> None:
         arrays["pca_components"] = np.asarray(model.components_, dtype=np.float32)
         arrays["pca_variance"] = np.asarray(model.explained_variance_, dtype=np.float64)
         arrays["pca_mean"] = np.asarray(model.pca_mean_, dtype=np.float64)
-    np.savez_compressed(path, **arrays)
+    # Through a file handle: exactly ``path`` (given a name, numpy would append .npz).
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 def _invalid(path, why: str) -> ValueError:

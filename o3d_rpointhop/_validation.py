@@ -11,7 +11,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_points", "as_cloud_list", "is_open3d_cloud", "describe_each"]
+__all__ = ["as_points", "as_cloud_list", "is_open3d_cloud", "describe_each", "MAX_COORDINATE"]
+
+#: Largest coordinate accepted: squared distances of larger ones overflow float64.
+MAX_COORDINATE = 1e150
 
 
 def is_open3d_cloud(obj: Any) -> bool:
@@ -98,6 +101,11 @@ def as_points(X: Any, name: str = "X", min_points: int = 1) -> np.ndarray:
         # copy, and the caller's array is never written to.
         arr = arr.copy()
     finite = np.isfinite(arr).all(axis=1)
+    if finite.all() and np.abs(arr).max() > MAX_COORDINATE:
+        raise ValueError(
+            f"{name} has coordinates up to {np.abs(arr).max():.3g}: beyond "
+            f"{MAX_COORDINATE:.0e} squared distances overflow; rescale the cloud"
+        )
     if not finite.all():
         bad = np.flatnonzero(~finite)
         shown = ", ".join(str(i) for i in bad[:5]) + (", ..." if bad.size > 5 else "")

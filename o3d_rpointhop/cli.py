@@ -6,18 +6,42 @@ import argparse
 import json
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
+from .registration.context import RegistrationWarning
 
 PROG = "o3d-rpointhop"
+
+#: Exit statuses (listed in ``--help``).
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_UNRELIABLE = 0, 1, 2, 3
+EXIT_CODES = f"""exit status:
+  {EXIT_OK}  success
+  {EXIT_ERROR}  error: a missing, empty, damaged or unreadable file, a directory given as a
+     file, NaN coordinates, too few points, degenerate geometry, an output that exists
+     as a folder or exceeds the size limit without --force; one line on stderr says which
+  {EXIT_USAGE}  usage error (unknown option, bad value)
+  {EXIT_UNRELIABLE}  register/demo finished, but the result is flagged: not converged (no
+     overlap, or a chance alignment) or ambiguous (a symmetric shape); outputs are
+     written, and stderr says which flag"""
+#: Largest output written without --force.
+MAX_OUTPUT_BYTES = 512 * 1024**2
 
 
 class CommandError(Exception):
     """A failure to report as one line on stderr with exit status 1."""
+
+
+def _check_size(path: str, nbytes: int, force: bool) -> None:
+    if nbytes > MAX_OUTPUT_BYTES and not force:
+        raise CommandError(
+            f"{path}: would write {nbytes / 1024**2:,.0f} MB (limit {MAX_OUTPUT_BYTES // 1024**2} "
+            "MB without --force); pass --force, or shorten the descriptor with --n-components"
+        )
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -48,9 +72,10 @@ def _load_model(path: str | None, n_components: int | None = None):
 
 # --------------------------------------------------------------------------- commands
 def cmd_fit(args: argparse.Namespace) -> int:
-    from .io import read_cloud
+    from .io import check_output_path, read_cloud
     from .rpointhop import RPointHopTransformer
 
+    check_output_path(args.output)
     clouds = [read_cloud(p) for p in args.clouds]
     params = {
         k: v
@@ -76,15 +101,18 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def cmd_describe(args: argparse.Namespace) -> int:
-    from .io import read_cloud
+    from .io import check_output_path, read_cloud, save_npy
 
+    check_output_path(args.output)
     cloud = read_cloud(args.cloud)
     model = _load_model(args.model, args.n_components)
     if args.model and args.n_components is not None:
         model.set_params(n_components=args.n_components)
+    # 4 bytes a value, plus the header: refuse before spending the time.
+    _check_size(args.output, 4 * len(cloud.points) * model.n_features_out_, args.force)
     start = time.perf_counter()
-    desc = model.transform(cloud)
-    np.save(args.output, np.ascontiguousarray(desc))
+    desc = model.set_params(progress=None).transform(cloud)
+    save_npy(args.output, np.ascontiguousarray(desc))
     print(
         f"{len(desc)} points described ({desc.shape[1]}-D) in "
         f"{time.perf_counter() - start:.3f} s, written to {args.output}"
@@ -125,11 +153,14 @@ def _refine_chain(args) -> list[str]:
 
 def cmd_register(args: argparse.Namespace) -> int:
     from .fpfh import FPFHTransformer
-    from .io import read_cloud, write_cloud
+    from .io import check_output_path, read_cloud, write_cloud
     from .registration import register
 
     source = read_cloud(args.source)
     target = read_cloud(args.target)
+    for out in (args.output, args.transform):
+        if out:
+            check_output_path(out)
     if args.descriptor == "fpfh":
         if args.model:
             raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
@@ -137,17 +168,22 @@ def cmd_register(args: argparse.Namespace) -> int:
     else:
         descriptor = _load_model(args.model) if args.model else None
     init = _read_matrix(args.init) if args.init else None
-    result = register(
-        source,
-        target,
-        descriptor,
-        global_method=None if args.global_method == "none" else args.global_method,
-        refine=_refine_chain(args),
-        voxel_size=args.voxel_size,
-        n_global_points=args.n_global_points,
-        init=init,
-        seed=args.seed,
-    )
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RegistrationWarning)  # reported below, once
+            result = register(
+                source,
+                target,
+                descriptor,
+                global_method=None if args.global_method == "none" else args.global_method,
+                refine=_refine_chain(args),
+                voxel_size=args.voxel_size,
+                n_global_points=args.n_global_points,
+                init=init,
+                seed=args.seed,
+            )
+    except ValueError as exc:  # name the files, not just "source" and "target"
+        raise CommandError(f"{exc} (source: {args.source}, target: {args.target})") from exc
     summary = result.as_dict()
     summary.update({"source": args.source, "target": args.target})
     if args.output:
@@ -169,7 +205,26 @@ def cmd_register(args: argparse.Namespace) -> int:
             f"fitness {result.fitness:.3f}, inlier RMSE {result.inlier_rmse:.6g}, "
             f"voxel {result.voxel_size:.6g} ({steps})"
         )
-    return 0
+    return _flag_status(result)
+
+
+def _flag_status(result) -> int:
+    """Exit status of a finished registration: 3, with a line on stderr, when flagged."""
+    if not result.converged:
+        print(
+            f"{PROG}: warning: the result did not converge (fitness {result.fitness:.3f}): "
+            "no overlap, or a chance alignment",
+            file=sys.stderr,
+        )
+        return EXIT_UNRELIABLE
+    if result.ambiguous:
+        print(
+            f"{PROG}: warning: the result is ambiguous: turned by 180 degrees it fits about "
+            "as well (a symmetric shape or a featureless plane)",
+            file=sys.stderr,
+        )
+        return EXIT_UNRELIABLE
+    return EXIT_OK
 
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
@@ -275,7 +330,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         summary["rotation_error_deg"] = round(rotation_error_deg(result.transformation, truth), 4)
         summary["translation_error"] = translation_error(result.transformation, truth)
     print(json.dumps(summary, indent=2))
-    return 0
+    return _flag_status(result)
 
 
 # --------------------------------------------------------------------------- parser
@@ -283,9 +338,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG,
         description="Rotation-invariant R-PointHop descriptors and registration for Open3D.",
+        epilog=EXIT_CODES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    class _Sub:  # every command's --help lists the exit statuses too
+        @staticmethod
+        def add_parser(name, **kwargs):
+            kwargs.setdefault("epilog", EXIT_CODES)
+            kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+            return commands.add_parser(name, **kwargs)
+
+    sub = _Sub()
 
     p = sub.add_parser(
         "demo",
@@ -371,7 +437,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("describe", help="write one descriptor per point of a cloud (.npy)")
     p.add_argument("cloud")
-    p.add_argument("-o", "--output", required=True, help="descriptor file to write (.npy)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="descriptor file to write (.npy format, this exact path)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help=f"write outputs over {MAX_OUTPUT_BYTES // 1024**2} MB (a 1624-D descriptor is "
+        "6.5 kB a point)",
+    )
     p.add_argument("--model", help="model file written by 'fit' (default: the pretrained model)")
     p.add_argument(
         "--n-components",
@@ -389,7 +466,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except (CommandError, ValueError, FileNotFoundError, OSError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # no traceback for a user: one line, and how to get more
+        print(
+            f"{PROG}: error: unexpected {type(exc).__name__}: {exc} (please report it; "
+            f"'python -X dev -m o3d_rpointhop.cli ...' shows where)",
+            file=sys.stderr,
+        )
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

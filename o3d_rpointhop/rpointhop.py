@@ -498,7 +498,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         Parameters
         ----------
         path : str or path-like
-            Destination; ``.npz`` is appended by numpy if missing.
+            Destination, written exactly (no extension is added).
         """
         from ._persistence import save_model
 

@@ -84,7 +84,7 @@ def test_demo_on_your_own_pair(tmp_path, capsys):
     "args, message",
     [
         (["describe", "missing.ply", "--model", "m.npz", "-o", "d.npy"], "no such file"),
-        (["fit", "bad.ply", "-o", "m.npz"], "read no points"),
+        (["fit", "bad.ply", "-o", "m.npz"], "bad.ply: damaged or unreadable .ply file (RPly:"),
         (["fit", "cloud.foo", "-o", "m.npz"], "unknown point cloud format"),
         (["fit", "small.npy", "-o", "m.npz"], "too few"),
     ],

@@ -60,9 +60,9 @@ def check_geometry(points: np.ndarray, name: str, raw: Any = None) -> None:
         ``RegistrationResult.ambiguous``), and for float32 coordinates whose rounding
         step is coarse for the cloud's size (survey coordinates: pass float64).
     """
-    spread = np.sqrt(np.clip(np.linalg.eigvalsh(np.cov(points.T)), 0.0, None))[::-1]
-    if spread[0] == 0.0:
+    if not np.any(points != points[0]):
         raise ValueError(f"{name} has no spatial extent: all its points coincide")
+    spread = np.sqrt(np.clip(np.linalg.eigvalsh(np.cov(points.T)), 0.0, None))[::-1]
     if spread[1] <= _COLLINEAR * spread[0]:
         raise ValueError(
             f"{name} is collinear (its points lie on one line): a rotation about that line "

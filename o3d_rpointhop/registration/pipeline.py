@@ -81,9 +81,11 @@ class RegistrationResult:
         unreliable", not "surely right".
     ambiguous : bool
         True when the result turned by 180 degrees about one of the aligned source's
-        principal axes fits about as well (fitness at least 90 % of the result's, on
-        the global clouds): a symmetric shape, or a featureless plane, whose pose the
-        data cannot decide. A :class:`RegistrationWarning` is issued with either flag.
+        principal axes fits about as well (fitness within three resolutions at least
+        90 % of the result's, on the global clouds; the twins are not refined, so they
+        are judged at that wider distance): a symmetric shape, or a featureless plane,
+        whose pose the data cannot decide. A :class:`RegistrationWarning` is issued
+        with either flag.
     """
 
     transformation: np.ndarray
@@ -238,6 +240,12 @@ class RegistrationPipeline(BaseEstimator):
         for name, step in steps:
             outcome = step.run(context, current)
             outcome.name = name
+            if not np.isfinite(outcome.transformation).all():
+                raise ValueError(
+                    f"step {name!r} found no finite transformation: the clouds are too "
+                    "degenerate to register (nearly all points coincide, or too few distinct "
+                    "points for the neighbourhoods)"
+                )
             current = outcome.transformation  # in the context's centred frame
             outcome.transformation = context.to_world(current)
             results.append(outcome)
@@ -246,7 +254,7 @@ class RegistrationPipeline(BaseEstimator):
         wide = max(distance, SPREAD_DISTANCE * context.voxel_size)
         spread = evaluate(context, current, wide).inlier_rmse / wide
         converged = final.fitness >= MIN_FITNESS and spread <= MAX_SPREAD
-        ambiguous = converged and _ambiguous(context, current, distance)
+        ambiguous = converged and _ambiguous(context, current, wide)
         if not converged:
             warnings.warn(
                 f"the registration did not converge: {final.fitness:.1%} of the source "
