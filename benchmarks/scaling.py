@@ -132,7 +132,7 @@ def plot(rows: list[dict], path: Path) -> None:
         ax.set_xlabel("points")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.3)
-    fig.axes[0].legend(fontsize=7)
+    fig.axes[0].legend(fontsize=7, loc="lower right")
     fig.suptitle("Descriptor cost against cloud size (log-log)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -249,7 +249,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     else:
         if args.protocol:
             raise CommandError("3dmatch has no protocols to choose")
-        results = run_3dmatch(methods, **common)
+        results = run_3dmatch(methods, max_pairs=args.max_pairs, **common)
     paths = write_report(results, args.output)
     print(Path(paths[1]).read_text())
     print("written: " + ", ".join(paths))
@@ -419,6 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", default="benchmark_results", help="where results go")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-shapes", type=int, help="ModelNet40: use only the first N test shapes")
+    p.add_argument(
+        "--max-pairs", type=int, help="3DMatch: a seeded sample of N pairs per benchmark"
+    )
     p.add_argument("--model", help="R-PointHop model file (default: the pretrained model)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_benchmark)

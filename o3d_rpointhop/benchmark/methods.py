@@ -11,6 +11,7 @@ library's pipeline instead, to separate the descriptor from the pipeline.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -19,7 +20,7 @@ import open3d as o3d
 
 from ..fpfh import FPFHTransformer
 from ..open3d_interop import to_point_cloud
-from ..registration import register
+from ..registration import RegistrationWarning, register
 from ..registration.steps import repeatable_open3d
 
 __all__ = ["METHODS", "Method", "run_method"]
@@ -222,7 +223,12 @@ def run_method(
     # Its RANSAC is only repeatable on one thread (see repeatable_open3d), as ours runs.
     if name == "rpointhop-open3d-ransac-icp":
         _recipe_model()  # loading the model file is not part of the recipe's time
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+    # Flagged results are scored like any other; the flags' warnings would only repeat.
+    with (
+        warnings.catch_warnings(),
+        o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error),
+    ):
+        warnings.simplefilter("ignore", RegistrationWarning)
         start = time.perf_counter()
         if name in _OPEN3D_ONLY:
             with repeatable_open3d():

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import platform
-import sys
 import time
 from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
+from .._progress import progress_bar
 from ..open3d_interop import to_point_cloud
 from ..registration.context import resolve_voxel_size
 from ..rpointhop import RPointHopTransformer, default_descriptor
@@ -48,28 +48,20 @@ MODELNET40_FPFH_VOXEL = 0.05
 
 
 class Progress:
-    """A one-line progress bar on stderr (no dependency, silent when disabled)."""
+    """A ``tqdm`` bar on stderr for a benchmark (shown when enabled and stderr is a
+    terminal, or when ``enabled`` is True and asked explicitly by the caller)."""
 
     def __init__(self, total: int, label: str, enabled: bool = True) -> None:
-        self.total, self.label, self.enabled = max(total, 1), label, enabled
-        self.done = 0
-        self.start = time.perf_counter()
+        self.bar = progress_bar(
+            max(total, 1), desc=label, unit="pair", enabled=None if enabled else False
+        )
 
     def step(self, note: str = "") -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        width = 24
-        filled = int(width * self.done / self.total)
-        elapsed = time.perf_counter() - self.start
-        eta = elapsed / self.done * (self.total - self.done)
-        sys.stderr.write(
-            f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} "
-            f"{elapsed:5.0f}s eta {eta:4.0f}s {note[:30]:30s}"
-        )
-        if self.done >= self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        if self.bar is not None:
+            self.bar.set_postfix_str(note[:30], refresh=False)
+            self.bar.update(1)
+            if self.bar.n >= self.bar.total:
+                self.bar.close()
 
 
 def _machine() -> dict:
@@ -298,8 +290,12 @@ def run_3dmatch(
     seed: int = 0,
     model: RPointHopTransformer | None = None,
     progress: bool = True,
+    max_pairs: int | None = None,
 ) -> dict:
     """3DMatch / 3DLoMatch fragment pairs with official ground truth.
+
+    ``max_pairs``: a seeded random sample of at most this many pairs per benchmark
+    (``None``: every pair).
 
     Registration recall: share of pairs whose official error (from ``gt.info``) is below
     0.2 m. Feature-match recall: share of pairs where more than 5 % of the mutual
@@ -313,9 +309,22 @@ def run_3dmatch(
     methods = _check_methods(methods)
     model = model if model is not None else default_descriptor()
     pairs = load_3dmatch_pairs(data)
+    if max_pairs is not None:
+        rng = np.random.default_rng(seed)
+        picked = []
+        for bench in ("3DMatch", "3DLoMatch"):
+            these = [p for p in pairs if p.benchmark == bench]
+            keep = np.sort(rng.permutation(len(these))[:max_pairs])
+            picked += [these[k] for k in keep]
+        pairs = picked
     out = {
         "dataset": "3dmatch",
-        "settings": {"seed": seed, **_model_facts(model), **_machine()},
+        "settings": {
+            "seed": seed,
+            "pairs_per_benchmark": "all" if max_pairs is None else f"at most {max_pairs}",
+            **_model_facts(model),
+            **_machine(),
+        },
         "protocols": {},
     }
     bar = Progress(len(methods) * len(pairs) + 2 * len(pairs), "3dmatch", progress)
