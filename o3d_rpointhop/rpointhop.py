@@ -326,7 +326,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         # Sign fix, as for the Saab kernels: the largest-magnitude weight is positive.
         pivot = axes[np.arange(len(axes)), np.abs(axes).argmax(axis=1)]
         axes *= np.where(pivot < 0, -1.0, 1.0)[:, None]
-        self.components_ = axes
+        # Rounded to float32 as the model file stores them: a saved and reloaded model
+        # projects exactly as the fitted one.
+        self.components_ = axes.astype(np.float32).astype(np.float64)
         self.explained_variance_ = np.clip(variance[order], 0.0, None)
         self.pca_mean_ = moments.mean[0].copy()
 
