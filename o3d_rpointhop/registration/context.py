@@ -24,6 +24,8 @@ __all__ = ["RegistrationContext", "RegistrationWarning", "resolve_voxel_size"]
 # whose third is below it, a plane (relative standard deviations).
 _COLLINEAR = 1e-6
 _PLANAR = 1e-4
+# Small clouds whose point spacings differ by more than this factor are downsampled.
+_DENSITY_RATIO = 0.5
 # float32 coordinates whose rounding step exceeds this share of the cloud's extent.
 _FLOAT32_RESOLUTION = 1e-5
 
@@ -100,8 +102,10 @@ def resolve_voxel_size(
 
     ``"auto"``: clouds of at most ``n_global_points`` points are used as they are, and
     the resolution is their point spacing (the larger of the two median
-    nearest-neighbour distances); larger clouds are voxel-downsampled, with a voxel
-    chosen so that the larger cloud keeps about ``n_global_points`` points. A number is
+    nearest-neighbour distances), unless one cloud is more than twice as dense as the
+    other (near-duplicate points, uneven sampling): then both are voxel-downsampled at
+    that resolution. Larger clouds are voxel-downsampled, with a voxel chosen so that
+    the larger cloud keeps about ``n_global_points`` points. A number is
     used as the voxel size directly.
     """
     if isinstance(voxel_size, numbers.Real) and not isinstance(voxel_size, bool):
@@ -111,10 +115,13 @@ def resolve_voxel_size(
     if voxel_size != "auto":
         raise ValueError(f"voxel_size must be 'auto' or a positive number, got {voxel_size!r}")
     src, tgt = np.asarray(source.points), np.asarray(target.points)
-    spacing = max(point_spacing(src), point_spacing(tgt))
+    spacings = point_spacing(src), point_spacing(tgt)
+    spacing = max(spacings)
     largest = max(len(src), len(tgt))
     if largest <= n_global_points:
-        return spacing, False
+        # Descriptors compare neighbourhoods of k points: clouds of different density
+        # (near-duplicate points, uneven sampling) are evened out at the resolution.
+        return spacing, min(spacings) < _DENSITY_RATIO * spacing
     # Surfaces: the point count falls with the square of the voxel size.
     voxel = spacing * np.sqrt(largest / n_global_points)
     for _ in range(10):
