@@ -19,6 +19,7 @@ from .registration import (
     SVDGlobal,
     SymmetryCheck,
     register,
+    register_multiway,
 )
 from .rpointhop import RPointHopTransformer
 from .transforms import rigid_transform
@@ -42,6 +43,7 @@ __all__ = [
     "__version__",
     "find_correspondences",
     "register",
+    "register_multiway",
     "rigid_transform",
     "to_open3d_feature",
     "to_point_cloud",

@@ -6,7 +6,7 @@ points to (``data_dir=``), the ``O3D_RPOINTHOP_DATA`` environment variable, or
 """
 
 from ._paths import data_home
-from .bunny import BUNNY_SCANS, BunnyScan, load_bunny, read_bun_conf
+from .bunny import BUNNY_SCANS, BunnyScan, load_bunny, load_dragon, read_bun_conf
 from .modelnet40 import ModelNet40, load_modelnet40, normalize_unit_sphere
 from .synthetic import make_blob, make_object
 from .threedmatch import FragmentPair, load_3dmatch_pairs, read_gt_info, read_gt_log
@@ -19,6 +19,7 @@ __all__ = [
     "data_home",
     "load_3dmatch_pairs",
     "load_bunny",
+    "load_dragon",
     "load_modelnet40",
     "make_blob",
     "make_object",

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from ._paths import data_home
 
-__all__ = ["BunnyScan", "load_bunny", "read_bun_conf", "BUNNY_SCANS"]
+__all__ = ["BunnyScan", "load_bunny", "load_dragon", "read_bun_conf", "BUNNY_SCANS"]
 
 BUNNY_SCANS = (
     "bun000", "bun045", "bun090", "bun180", "bun270", "bun315",
@@ -100,3 +100,33 @@ def load_bunny(
         cloud = read_cloud(folder / f"{name}.ply")
         out[name] = BunnyScan(name, np.asarray(cloud.points).copy(), poses[name])
     return out
+
+
+def load_dragon(data_dir: str | os.PathLike | None = None) -> dict[str, BunnyScan]:
+    """The Stanford dragon "stand" range scans present in the data folder, with their
+    ``dragonStandRight.conf`` poses (the same convention as ``bun.conf``).
+
+    Parameters
+    ----------
+    data_dir : path, default=None
+        A folder holding ``dragonStandRight.conf`` and the scans, or one holding
+        ``stanford/dragon_stand/`` (the shared data layout).
+    """
+    from ..io import read_cloud
+
+    root = Path(data_dir).expanduser() if data_dir is not None else data_home()
+    folder = (
+        root if (root / "dragonStandRight.conf").is_file() else root / "stanford" / "dragon_stand"
+    )
+    conf = folder / "dragonStandRight.conf"
+    if not conf.is_file():
+        raise FileNotFoundError(f"no dragonStandRight.conf in {folder}")
+    poses = read_bun_conf(conf)
+    scans = {}
+    for name in sorted(poses, key=lambda n: int(n.rsplit("_", 1)[1]) if "_" in n else -1):
+        path = folder / f"{name}.ply"
+        if path.is_file():
+            scans[name] = BunnyScan(name, np.asarray(read_cloud(path).points).copy(), poses[name])
+    if len(scans) < 2:
+        raise FileNotFoundError(f"fewer than two dragon scans in {folder}")
+    return scans

@@ -1,6 +1,7 @@
 """Registration: global estimates from descriptors, then ICP refinement chains."""
 
 from .context import RegistrationContext, RegistrationWarning
+from .multiway import MultiwayResult, register_multiway
 from .pipeline import RegistrationPipeline, RegistrationResult, register
 from .steps import (
     FGRGlobal,
@@ -30,5 +31,7 @@ __all__ = [
     "SVDGlobal",
     "StepResult",
     "SymmetryCheck",
+    "MultiwayResult",
     "register",
+    "register_multiway",
 ]

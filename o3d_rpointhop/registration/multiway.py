@@ -1,0 +1,359 @@
+"""Multiway registration: poses of many unposed scans in one call, through a pose graph.
+
+Every scan is downsampled to one common resolution and described once. Candidate pairs
+(all pairs of a few scans; for many scans, each scan's nearest neighbours by a pooled
+descriptor) are registered like ``register()`` does: descriptor matches, the vectorised
+RANSAC, point-to-plane ICP on the full scans, and Open3D's information matrix. Pairs
+that fit become edges of an Open3D ``PoseGraph``: a maximum spanning tree of the best
+edges gives the starting poses and is kept as certain, every other edge is a loop
+closure that Open3D's Levenberg-Marquardt optimisation may prune (line process). The
+optimised poses are refined once more (every kept edge re-registered by ICP from them,
+then optimised again). Scans that no kept edge joins to scan 0 are reported as
+unconnected and get no pose.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import open3d as o3d
+
+from .._validation import as_points
+from ..batch import _single_threaded, parallel_map
+from ..correspondences import find_correspondences
+from ..fpfh import point_spacing
+from ._ransac import ransac
+from .pipeline import MAX_SPREAD, SPREAD_DISTANCE
+from .steps import repeatable_open3d
+
+__all__ = ["MultiwayResult", "register_multiway"]
+
+reg = o3d.pipelines.registration
+
+#: Smallest ICP fitness (at 1.5 resolutions) for a pair to become an edge; a pair whose
+#: inliers spread like a chance alignment's (``RegistrationResult.converged``) never does.
+MIN_EDGE_FITNESS = 0.3
+#: Pairs registered per scan when there are too many scans for all pairs.
+RETRIEVED_NEIGHBOURS = 6
+#: Up to this many scans, every pair is a candidate.
+ALL_PAIRS_UP_TO = 12
+
+
+@dataclass
+class MultiwayResult:
+    """The outcome of :func:`register_multiway`.
+
+    Attributes
+    ----------
+    poses : list of (ndarray of shape (4, 4) or None)
+        ``poses[k]`` maps scan ``k`` into scan 0's frame; ``None`` for an unconnected
+        scan.
+    pose_graph : open3d.pipelines.registration.PoseGraph
+        The optimised graph (nodes: connected scans in order; edges: kept pairs).
+    pairs : dict
+        ``(i, j) -> (transformation, fitness)`` for every candidate pair registered
+        (the transformation maps scan ``j`` into scan ``i``).
+    edges : list of tuple
+        The pairs kept after optimisation, ``(i, j)``.
+    unconnected : list of int
+        Scans no kept edge joins to scan 0 (left out, never placed silently).
+    voxel_size : float
+        The common resolution.
+    seconds : float
+    """
+
+    poses: list
+    pose_graph: Any
+    pairs: dict = field(default_factory=dict)
+    edges: list = field(default_factory=list)
+    unconnected: list = field(default_factory=list)
+    voxel_size: float = 0.0
+    seconds: float = 0.0
+
+
+def _common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
+    """One resolution for every scan: the largest that any scan needs, its own spacing
+    widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
+    voxel^2), so that no scan is finer than it can be described."""
+    return float(
+        max(point_spacing(c) * max(1.0, np.sqrt(len(c) / n_global_points)) for c in clouds)
+    )
+
+
+def _prepare(points: np.ndarray, voxel: float, descriptor: Any):
+    """A scan's global cloud (at the common resolution) and its descriptors."""
+    # About the scan's own centroid: the voxel grid and the descriptors lose nothing far
+    # from the origin.
+    origin = points.mean(axis=0)
+    down = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points - origin))
+    down = down.voxel_down_sample(voxel).translate(origin)
+    features = np.asarray(descriptor.transform(np.asarray(down.points)))
+    return np.asarray(down.points), features
+
+
+def _register_pair(
+    source: np.ndarray,
+    target: np.ndarray,
+    source_global: np.ndarray,
+    target_global: np.ndarray,
+    source_features: np.ndarray,
+    target_features: np.ndarray,
+    voxel: float,
+    seed: int,
+):
+    """Scan ``source`` onto scan ``target``: matches, RANSAC, ICP, information matrix."""
+    corr = find_correspondences(source_features, target_features)
+    # Work about the target's centroid: survey-scale coordinates lose nothing.
+    origin = target.mean(axis=0)
+    found = ransac(
+        source_global[corr.pairs[:, 0]] - origin,
+        target_global[corr.pairs[:, 1]] - origin,
+        1.5 * voxel,
+        max_iteration=1_000_000,
+        confidence=0.999,
+        edge_length=0.9,
+        seed=seed,
+        clouds=(source_global - origin, target_global - origin),
+    )
+    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source - origin))
+    tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target - origin))
+    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+    transformation = _icp(src, tgt, voxel, found.transformation)
+    with repeatable_open3d():
+        fitness = reg.evaluate_registration(src, tgt, 1.5 * voxel, transformation).fitness
+        wide = SPREAD_DISTANCE * voxel
+        spread = reg.evaluate_registration(src, tgt, wide, transformation).inlier_rmse / wide
+        if spread > MAX_SPREAD:  # a chance alignment (see RegistrationResult.converged)
+            fitness = 0.0
+        information = reg.get_information_matrix_from_point_clouds(
+            src, tgt, 1.5 * voxel, transformation
+        )
+    shift = np.eye(4)
+    shift[:3, 3] = origin
+    world = shift @ transformation @ np.linalg.inv(shift)
+    return world, float(fitness), information
+
+
+def _icp(source, target, voxel: float, init: np.ndarray) -> np.ndarray:
+    """Point-to-plane ICP at 2, then 0.5 resolutions (as ``register()``'s default)."""
+    current = init
+    with repeatable_open3d():
+        for distance in (2.0 * voxel, 0.5 * voxel):
+            current = reg.registration_icp(
+                source,
+                target,
+                distance,
+                current,
+                reg.TransformationEstimationPointToPlane(),
+                reg.ICPConvergenceCriteria(1e-6, 1e-6, 50),
+            ).transformation
+    return np.array(current)
+
+
+def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
+    """All pairs of a few scans; for many, each scan's ``k`` nearest by its pooled
+    (mean, unit-length) descriptor, plus its neighbours in the given order."""
+    n = len(features)
+    if n <= ALL_PAIRS_UP_TO:
+        return [(i, j) for i in range(n) for j in range(i + 1, n)]
+    pooled = np.stack([f.mean(axis=0) for f in features])
+    pooled /= np.linalg.norm(pooled, axis=1, keepdims=True) + 1e-12
+    distance = np.linalg.norm(pooled[:, None] - pooled[None], axis=2)
+    np.fill_diagonal(distance, np.inf)
+    pairs = {(i, i + 1) for i in range(n - 1)}
+    for i in range(n):
+        for j in np.argsort(distance[i], kind="stable")[:k]:
+            pairs.add((min(i, int(j)), max(i, int(j))))
+    return sorted(pairs)
+
+
+def _spanning_tree(edges: dict, n: int) -> list[tuple[int, int]]:
+    """Maximum spanning forest by fitness (Kruskal)."""
+    parent = list(range(n))
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    tree = []
+    for (i, j), _edge in sorted(edges.items(), key=lambda e: -e[1][1]):
+        ri, rj = root(i), root(j)
+        if ri != rj:
+            parent[ri] = rj
+            tree.append((i, j))
+    return tree
+
+
+def _poses_from_tree(tree, edges, n: int) -> list:
+    """Poses (scan -> scan 0) along the tree; None where scan 0 cannot be reached."""
+    poses: list = [None] * n
+    poses[0] = np.eye(4)
+    changed = True
+    while changed:
+        changed = False
+        for i, j in tree:
+            t_ij = edges[(i, j)][0]  # maps j into i
+            if poses[i] is not None and poses[j] is None:
+                poses[j] = poses[i] @ t_ij
+                changed = True
+            elif poses[j] is not None and poses[i] is None:
+                poses[i] = poses[j] @ np.linalg.inv(t_ij)
+                changed = True
+    return poses
+
+
+def _optimise(edges: dict, tree: list, poses: list, voxel: float):
+    """Open3D's global optimisation over the connected scans; returns the graph, the
+    optimised poses (None for unconnected scans) and the edges it kept."""
+    nodes = [k for k, p in enumerate(poses) if p is not None]
+    index = {k: m for m, k in enumerate(nodes)}
+    graph = reg.PoseGraph()
+    for k in nodes:
+        graph.nodes.append(reg.PoseGraphNode(poses[k]))
+    tree_set = set(tree)
+    listed = []
+    for (i, j), (t_ij, _, information) in edges.items():
+        if i not in index or j not in index:
+            continue
+        # Open3D's edge maps its source node into its target node: j into i.
+        graph.edges.append(
+            reg.PoseGraphEdge(
+                index[j], index[i], t_ij, information, uncertain=(i, j) not in tree_set
+            )
+        )
+        listed.append((i, j))
+    option = reg.GlobalOptimizationOption(
+        max_correspondence_distance=1.5 * voxel,
+        edge_prune_threshold=0.25,
+        preference_loop_closure=1.0,
+        reference_node=0,
+    )
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        reg.global_optimization(
+            graph,
+            reg.GlobalOptimizationLevenbergMarquardt(),
+            reg.GlobalOptimizationConvergenceCriteria(),
+            option,
+        )
+    optimised: list = [None] * len(poses)
+    # Relative to scan 0's optimised pose, so that scan 0 is exactly the identity.
+    reference = np.linalg.inv(np.array(graph.nodes[index[0]].pose))
+    for k in nodes:
+        optimised[k] = reference @ np.array(graph.nodes[index[k]].pose)
+    optimised[0] = np.eye(4)
+    # Open3D removes the edges its line process pruned; what remains was kept.
+    remaining = {(nodes[e.target_node_id], nodes[e.source_node_id]) for e in graph.edges}
+    kept = [e for e in listed if e in remaining]
+    return graph, optimised, kept
+
+
+def register_multiway(
+    clouds: list[Any],
+    descriptor: Any = None,
+    *,
+    n_global_points: int = 2048,
+    min_fitness: float = MIN_EDGE_FITNESS,
+    n_jobs: int | None = None,
+    progress: bool | None = None,
+    seed: int = 0,
+) -> MultiwayResult:
+    """Poses of unposed scans of one object or scene, in scan 0's frame.
+
+    Parameters
+    ----------
+    clouds : list of array-like (n_k, 3) or Open3D point clouds
+        At least two scans; sizes and resolutions may differ.
+    descriptor : transformer, default=None
+        ``None`` is ``register()``'s default (the pretrained R-PointHop model on 64
+        principal axes); an ``FPFHTransformer`` works the same way. Each scan is
+        described once.
+    n_global_points : int, default=2048
+        The common resolution keeps about this many points of the largest scan.
+    min_fitness : float, default=0.3
+        A pair becomes an edge when ICP leaves at least this share of the source scan
+        within 1.5 resolutions of the target.
+    n_jobs : int, default=None
+        Parallel pair registrations (joblib; a Dask cluster under
+        ``joblib.parallel_config(backend="dask")``).
+    progress : bool, default=None
+        A bar on stderr over the pairs (``None``: when stderr is a terminal).
+    seed : int, default=0
+
+    Returns
+    -------
+    MultiwayResult
+
+    Raises
+    ------
+    ValueError
+        For fewer than two clouds, or a cloud that is not a valid point cloud.
+    """
+    from ..rpointhop import default_descriptor
+
+    start = time.perf_counter()
+    if not isinstance(clouds, (list, tuple)) or len(clouds) < 2:
+        raise ValueError(
+            "register_multiway needs a list of at least two clouds, got "
+            f"{len(clouds) if isinstance(clouds, (list, tuple)) else type(clouds).__name__}"
+        )
+    if not 0.0 < min_fitness <= 1.0:
+        raise ValueError(f"min_fitness must be in (0, 1], got {min_fitness!r}")
+    points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
+    worker = _single_threaded(descriptor if descriptor is not None else default_descriptor())
+    voxel = _common_voxel(points, n_global_points)
+    prepared = parallel_map(
+        _prepare, [(p, voxel, worker) for p in points], n_jobs=n_jobs, progress=progress,
+        desc="describe", unit="scan",
+    )  # fmt: skip
+    features = [f for _, f in prepared]
+    candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
+    results = parallel_map(
+        _register_pair,
+        [
+            (points[j], points[i], prepared[j][0], prepared[i][0], features[j], features[i],
+             voxel, seed)
+            for i, j in candidates
+        ],
+        n_jobs=n_jobs, progress=progress, desc="pairs", unit="pair",
+    )  # fmt: skip
+    pairs = {pair: (t, f) for pair, (t, f, _) in zip(candidates, results, strict=True)}
+    edges = {
+        pair: result
+        for pair, result in zip(candidates, results, strict=True)
+        if result[1] >= min_fitness
+    }
+    tree = _spanning_tree(edges, len(points))
+    poses = _poses_from_tree(tree, edges, len(points))
+    graph, poses, kept = _optimise(edges, tree, poses, voxel)
+    # Final refinement: every kept edge again by ICP from the optimised poses.
+    refined = {}
+    for i, j in kept:
+        relative = np.linalg.inv(poses[i]) @ poses[j]
+        origin = points[i].mean(axis=0)
+        shift = np.eye(4)
+        shift[:3, 3] = origin
+        src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[j] - origin))
+        tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[i] - origin))
+        tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+        local = _icp(src, tgt, voxel, np.linalg.inv(shift) @ relative @ shift)
+        with repeatable_open3d():
+            information = reg.get_information_matrix_from_point_clouds(src, tgt, 1.5 * voxel, local)
+        refined[(i, j)] = (shift @ local @ np.linalg.inv(shift), edges[(i, j)][1], information)
+    if refined:
+        tree = [e for e in tree if e in refined]
+        graph, poses, kept = _optimise(refined, tree, poses, voxel)
+    unconnected = [k for k, p in enumerate(poses) if p is None]
+    return MultiwayResult(
+        poses=poses,
+        pose_graph=graph,
+        pairs=pairs,
+        edges=kept,
+        unconnected=unconnected,
+        voxel_size=voxel,
+        seconds=time.perf_counter() - start,
+    )
