@@ -26,8 +26,9 @@ EXIT_CODES = f"""exit status:
      as a folder or exceeds the size limit without --force; one line on stderr says which
   {EXIT_USAGE}  usage error (unknown option, bad value)
   {EXIT_UNRELIABLE}  register/demo finished, but the result is flagged: not converged (no
-     overlap, or a chance alignment) or ambiguous (a symmetric shape); outputs are
-     written, and stderr says which flag"""
+     overlap, or a chance alignment) or ambiguous (a symmetric shape); reconstruct
+     finished with unconnected scans left out; outputs are written, and stderr says
+     which"""
 #: Largest output written without --force.
 MAX_OUTPUT_BYTES = 512 * 1024**2
 
@@ -256,6 +257,64 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reconstruct(args: argparse.Namespace) -> int:
+    import open3d as o3d
+
+    from .fpfh import FPFHTransformer
+    from .io import check_output_path, read_cloud, write_cloud
+    from .registration.multiway import register_multiway
+
+    for out in (args.output, args.poses, args.mesh):
+        if out:
+            check_output_path(out)
+    scans = [read_cloud(p) for p in args.scans]
+    descriptor = (
+        FPFHTransformer(radius="auto", normal_radius="auto") if args.descriptor == "fpfh" else None
+    )
+    result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, seed=args.seed, progress=None)
+    voxel = args.voxel_size or result.voxel_size / 2
+    palette = np.array(
+        [[0.12, 0.47, 0.71], [1.0, 0.5, 0.05], [0.17, 0.63, 0.17], [0.84, 0.15, 0.16],
+         [0.58, 0.4, 0.74], [0.55, 0.34, 0.29], [0.89, 0.47, 0.76], [0.5, 0.5, 0.5],
+         [0.74, 0.74, 0.13], [0.09, 0.75, 0.81]]
+    )  # fmt: skip
+    merged = o3d.geometry.PointCloud()
+    for k, (scan, pose) in enumerate(zip(scans, result.poses, strict=True)):
+        if pose is None:
+            continue
+        part = o3d.geometry.PointCloud(scan.points).transform(pose)
+        part.paint_uniform_color(palette[k % len(palette)])
+        merged += part
+    merged = merged.voxel_down_sample(voxel)
+    write_cloud(args.output, merged)
+    summary = {
+        "scans": list(args.scans),
+        "poses": [None if p is None else p.tolist() for p in result.poses],
+        "unconnected": [args.scans[k] for k in result.unconnected],
+        "edges": [[args.scans[i], args.scans[j]] for i, j in result.edges],
+        "voxel_size": result.voxel_size,
+        "seconds": result.seconds,
+    }
+    if args.poses:
+        Path(args.poses).write_text(json.dumps(summary, indent=2))
+    if args.mesh:
+        merged.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=30))
+        merged.orient_normals_consistent_tangent_plane(16)
+        mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(merged, depth=9)
+        if not o3d.io.write_triangle_mesh(args.mesh, mesh):
+            raise CommandError(f"{args.mesh}: Open3D could not write the mesh")
+    print(
+        f"{len(scans) - len(result.unconnected)} of {len(scans)} scans placed, "
+        f"{len(result.edges)} edges kept, {result.seconds:.1f} s; merged cloud "
+        f"({len(merged.points)} points) written to {args.output}"
+    )
+    if result.unconnected:
+        names = ", ".join(summary["unconnected"])
+        print(f"{PROG}: warning: unconnected (left out): {names}", file=sys.stderr)
+        return EXIT_UNRELIABLE
+    return EXIT_OK
+
+
 def _sample_pair(args: argparse.Namespace):
     """The demo's pair: the user's files, else two real Bunny scans when the data is
     around, else two samples of a synthetic object rotated apart."""
@@ -425,6 +484,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", help="R-PointHop model file (default: the pretrained model)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_benchmark)
+
+    p = sub.add_parser(
+        "reconstruct",
+        help="rebuild an object or scene from unposed scans (multiway registration)",
+        description="Register every scan to scan 0 through a pose graph and write the "
+        "merged, voxel-downsampled cloud coloured by scan. Scans no other scan overlaps "
+        "are reported and left out (exit status 3).",
+    )
+    p.add_argument("scans", nargs="+", help="two or more scans (.ply, .pcd, .xyz, .npy, ...)")
+    p.add_argument("-o", "--output", required=True, help="merged cloud to write (.ply, ...)")
+    p.add_argument("--poses", help="write the poses (scan -> scan 0), edges and flags as JSON")
+    p.add_argument("--mesh", help="also write an Open3D Poisson surface mesh here")
+    p.add_argument("--descriptor", choices=["rpointhop", "fpfh"], default="rpointhop")
+    p.add_argument("--voxel-size", type=float, help="voxel of the merged cloud")
+    p.add_argument("--n-jobs", type=int, help="parallel pair registrations")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=cmd_reconstruct)
 
     p = sub.add_parser("fit", help="fit an R-PointHop model on point cloud files")
     p.add_argument("clouds", nargs="+", help="training clouds (.ply, .pcd, .xyz, .npy, ...)")

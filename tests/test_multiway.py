@@ -78,3 +78,30 @@ def test_scans_of_different_sizes_and_resolutions():
 def test_bad_input(clouds, message):
     with pytest.raises(ValueError, match=message):
         register_multiway(clouds)
+
+
+def test_reconstruct_command(tmp_path, capsys):
+    import json
+
+    from o3d_rpointhop.cli import EXIT_OK, EXIT_UNRELIABLE, main
+
+    scans, _ = _scans(3, seed=1)
+    names = []
+    for k, scan in enumerate(scans):
+        np.save(tmp_path / f"s{k}.npy", scan)
+        names.append(str(tmp_path / f"s{k}.npy"))
+    out, poses = tmp_path / "merged.ply", tmp_path / "poses.json"
+    assert main(["reconstruct", *names, "-o", str(out), "--poses", str(poses)]) == EXIT_OK
+    summary = json.loads(poses.read_text())
+    assert summary["unconnected"] == [] and len(summary["poses"]) == 3
+    import open3d as o3d
+
+    merged = o3d.io.read_point_cloud(str(out))
+    assert len(merged.points) > 1000 and merged.has_colors()
+    # Each scan's colour is there (voxels shared by two scans blend theirs).
+    colours = {tuple(c) for c in np.asarray(merged.colors).round(2)}
+    assert {(0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.17, 0.63, 0.17)} <= colours
+    np.save(tmp_path / "other.npy", make_object(1700, shape_seed=77) * 0.8 + 0.3)
+    status = main(["reconstruct", *names, str(tmp_path / "other.npy"), "-o", str(out)])
+    assert status == EXIT_UNRELIABLE
+    assert "unconnected (left out)" in capsys.readouterr().err
