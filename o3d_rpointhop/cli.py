@@ -239,6 +239,8 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     )
     from .rpointhop import default_descriptor
 
+    if args.dataset == "multiway":
+        return _benchmark_multiway(args)
     methods = args.methods.split(",") if args.methods else list(METHODS)
     model = _load_model(args.model) if args.model else default_descriptor()
     common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
@@ -312,6 +314,33 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         names = ", ".join(summary["unconnected"])
         print(f"{PROG}: warning: unconnected (left out): {names}", file=sys.stderr)
         return EXIT_UNRELIABLE
+    return EXIT_OK
+
+
+def _benchmark_multiway(args: argparse.Namespace) -> int:
+    from .benchmark.multiway import OBJECTS, markdown, plot_reconstruction, run_multiway
+
+    objects = args.protocol or list(OBJECTS)
+    unknown = [o for o in objects if o not in OBJECTS]
+    if unknown:
+        raise CommandError(f"multiway objects are {list(OBJECTS)}, got {unknown}")
+    results = run_multiway(objects, data=args.data, seed=args.seed)
+    folder = Path(args.output)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, entry in results["objects"].items():
+        for method in entry["methods"]:
+            path = folder / f"multiway_{name}_{method}.png"
+            plot_reconstruction(entry, method, path, f"{name}: {method}, scans by colour")
+            written.append(str(path))
+        del entry["moved"]
+    (folder / "multiway.json").write_text(json.dumps(results, indent=1))
+    (folder / "multiway.md").write_text(markdown(results))
+    print((folder / "multiway.md").read_text())
+    print(
+        "written: "
+        + ", ".join([str(folder / "multiway.json"), str(folder / "multiway.md"), *written])
+    )
     return EXIT_OK
 
 
@@ -469,9 +498,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run every method on the dataset's protocols in one run and write "
         "<output>/<dataset>.json, .md and .png. ModelNet40 protocols: paper, "
         "paper-unseen-classes, paper-noise, paper-partial, angle-sweep, resampled, "
-        "resampled-noise, resampled-partial; bunny: scans, paper.",
+        "resampled-noise, resampled-partial; bunny: scans, paper; multiway: bunny, dragon "
+        "(every scan from an unknown pose, rebuilt with register_multiway).",
     )
-    p.add_argument("dataset", choices=["modelnet40", "bunny", "3dmatch"])
+    p.add_argument("dataset", choices=["modelnet40", "bunny", "3dmatch", "multiway"])
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
     p.add_argument("--methods", help="comma-separated methods (default: all)")
     p.add_argument("--data", help="data folder (default: $O3D_RPOINTHOP_DATA or ../shared/data)")

@@ -269,7 +269,7 @@ def register_multiway(
     clouds : list of array-like (n_k, 3) or Open3D point clouds
         At least two scans; sizes and resolutions may differ.
     descriptor : transformer, default=None
-        ``None`` is ``register()``'s default (the pretrained R-PointHop model on 64
+        ``None`` is ``register()``'s default (the pretrained R-PointHop model on 128
         principal axes); an ``FPFHTransformer`` works the same way. Each scan is
         described once.
     n_global_points : int, default=2048
