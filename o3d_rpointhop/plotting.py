@@ -1,4 +1,5 @@
-"""Off-screen pictures of registrations (matplotlib, no display needed)."""
+"""Off-screen pictures of registrations (matplotlib's Figure API: no display, no backend
+switch; matplotlib is the optional ``[plot]`` extra)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,17 @@ import numpy as np
 from ._validation import as_points
 from .transforms import apply_transform
 
-__all__ = ["save_registration_png"]
+__all__ = ["save_registration_png", "require_matplotlib"]
+
+
+def require_matplotlib():
+    """matplotlib's ``Figure`` class (the object API: no pyplot, so the caller's backend
+    and open figures are left alone), or an ImportError saying how to install it."""
+    try:
+        from matplotlib.figure import Figure
+    except ImportError as exc:
+        raise ImportError("pictures need matplotlib: pip install 'o3d-rpointhop[plot]'") from exc
+    return Figure
 
 
 def _thin(points: np.ndarray, limit: int, seed: int = 0) -> np.ndarray:
@@ -41,11 +52,7 @@ def save_registration_png(
     max_points : int, default=4000
         Points drawn per cloud (a random subset of larger clouds).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    figure_class = require_matplotlib()
     src = _thin(as_points(source, "source"), max_points)
     tgt = _thin(as_points(target, "target"), max_points, seed=1)
     aligned = apply_transform(src, transformation)
@@ -54,7 +61,7 @@ def save_registration_png(
     centre = tgt.mean(axis=0)
     _, _, axes = np.linalg.svd(tgt - centre, full_matrices=False)
     view = [(p - centre) @ axes.T for p in (src, aligned, tgt)]
-    fig = plt.figure(figsize=(11, 5.2))
+    fig = figure_class(figsize=(11, 5.2))
     for k, (label, moved) in enumerate((("before", view[0]), ("after", view[1]))):
         ax = fig.add_subplot(1, 2, k + 1, projection="3d")
         both = np.concatenate([moved, view[2]])
@@ -74,4 +81,3 @@ def save_registration_png(
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

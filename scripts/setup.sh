@@ -25,8 +25,23 @@ if [ -n "$missing" ] && command -v apt-get >/dev/null 2>&1; then
 fi
 
 if [ ! -x .venv/bin/python ]; then
+    echo "setup: creating .venv"
     "$PYTHON" -m venv .venv
 fi
-.venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
-.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,distributed]"
+# Reinstall only when pyproject.toml changed since the last successful install.
+stamp=.venv/.o3d-rpointhop-installed
+want=$(cksum pyproject.toml | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+    echo "setup: installing o3d-rpointhop and its test, plot and distributed extras"
+    # pip's notices go to a log, shown only if the install fails.
+    log=.venv/pip-install.log
+    if ! { .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip &&
+        .venv/bin/python -m pip install -q --disable-pip-version-check \
+            -e ".[test,plot,distributed]"; } > "$log" 2>&1; then
+        cat "$log" >&2
+        echo "setup: pip install failed (log above, also in $log)" >&2
+        exit 1
+    fi
+    echo "$want" > "$stamp"
+fi
 echo "setup: ready (.venv/bin/o3d-rpointhop, .venv/bin/python -m pytest)"

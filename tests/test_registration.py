@@ -401,3 +401,29 @@ def test_documented_open3d_recipes_run_silently_and_register(capfd):
     assert np.linalg.norm(first[:3, 3] - truth[:3, 3]) < 0.02
     assert rotation_error_deg(second, truth) < 20.0
     assert np.linalg.norm(second[:3, 3] - truth[:3, 3]) < 0.15
+
+
+def test_result_becomes_an_open3d_result(model, target):
+    source, truth = moved_copy(target, 6)
+    result = register(source, target, model)
+    o3d_result = result.to_open3d()
+    assert isinstance(o3d_result, o3d.pipelines.registration.RegistrationResult)
+    np.testing.assert_array_equal(np.asarray(o3d_result.transformation), result.transformation)
+    assert o3d_result.fitness == pytest.approx(result.fitness)
+    assert o3d_result.inlier_rmse == pytest.approx(result.inlier_rmse)
+    np.testing.assert_array_equal(
+        np.asarray(o3d_result.correspondence_set), result.correspondence_set
+    )
+    assert len(result.correspondence_set) > 0
+
+
+def test_import_works_under_python_OO():
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-OO", "-c", "import o3d_rpointhop; print('ok')"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr

@@ -95,8 +95,9 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
 
 def plot_reconstruction(entry: dict, method: str, path: Path, title: str) -> None:
     """The merged scans coloured by scan, seen along their thinnest axis."""
-    from matplotlib.figure import Figure
+    from ..plotting import require_matplotlib
 
+    figure_class = require_matplotlib()
     poses = entry["methods"][method]["poses"]
     parts = [
         apply_transform(m[:: max(1, len(m) // 3000)], np.array(p))
@@ -106,7 +107,7 @@ def plot_reconstruction(entry: dict, method: str, path: Path, title: str) -> Non
     every = np.concatenate(parts)
     centre = every.mean(axis=0)
     _, _, axes = np.linalg.svd(every - centre, full_matrices=False)
-    fig = Figure(figsize=(5.5, 5.5))
+    fig = figure_class(figsize=(5.5, 5.5))
     ax = fig.add_subplot(1, 1, 1)
     for k, part in enumerate(parts):
         view = (part - centre) @ axes.T

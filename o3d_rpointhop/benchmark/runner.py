@@ -454,17 +454,17 @@ def markdown(results: dict) -> str:
 
 
 def _plots(results: dict, folder: Path, stem: str) -> list[str]:
-    import matplotlib
+    from ..plotting import require_matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    figure_class = require_matplotlib()
 
     written = []
     bars = {n: p for n, p in results["protocols"].items() if "angles" not in p}
     metric = "registration_recall" if results["dataset"] == "3dmatch" else "success_rate"
     if bars:
         methods = list(next(iter(bars.values()))["summary"])
-        fig, ax = plt.subplots(figsize=(max(7, 1.6 * len(bars) + 4), 4))
+        fig = figure_class(figsize=(max(7, 1.6 * len(bars) + 4), 4))
+        ax = fig.subplots()
         width = 0.8 / len(methods)
         for k, method in enumerate(methods):
             values = [p["summary"][method].get(metric, np.nan) for p in bars.values()]
@@ -477,14 +477,14 @@ def _plots(results: dict, folder: Path, stem: str) -> list[str]:
         fig.tight_layout()
         path = folder / f"{stem}_{metric}.png"
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         written.append(str(path))
     for name, protocol in results["protocols"].items():
         if "angles" not in protocol:
             continue
         angles = protocol["angles"]
         methods = list(protocol["summary"][str(angles[0])])
-        fig, axes = plt.subplots(1, 4, figsize=(16, 3.6))
+        fig = figure_class(figsize=(16, 3.6))
+        axes = fig.subplots(1, 4)
         for ax, (key, label) in zip(
             axes,
             (("rmse_r", "RMSE(R) deg"), ("mae_r", "MAE(R) deg"), ("rmse_t", "RMSE(t)"),
@@ -501,7 +501,6 @@ def _plots(results: dict, folder: Path, stem: str) -> list[str]:
         fig.tight_layout()
         path = folder / f"{stem}_{name}.png"
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         written.append(str(path))
     return written
 

@@ -99,6 +99,25 @@ class RegistrationResult:
     converged: bool = True
     ambiguous: bool = False
 
+    @property
+    def correspondence_set(self) -> np.ndarray:
+        """Open3D's name for :attr:`correspondences`."""
+        return self.correspondences
+
+    def to_open3d(self):
+        """This result as an ``open3d.pipelines.registration.RegistrationResult``
+        (transformation, fitness, inlier RMSE and correspondence set)."""
+        import open3d as o3d
+
+        out = o3d.pipelines.registration.RegistrationResult()
+        out.transformation = np.asarray(self.transformation, dtype=np.float64)
+        out.fitness = float(self.fitness)
+        out.inlier_rmse = float(self.inlier_rmse)
+        out.correspondence_set = o3d.utility.Vector2iVector(
+            np.asarray(self.correspondences, dtype=np.int32).reshape(-1, 2)
+        )
+        return out
+
     def as_dict(self) -> dict:
         """JSON-ready summary (the CLI's ``--json`` output)."""
         return {

@@ -685,7 +685,8 @@ class GeneralizedICP(_ICPStep):
 
 
 for _cls in (PointToPointICP, PointToPlaneICP, GeneralizedICP):
-    _cls.__doc__ = _cls.__doc__.format(distance=_DISTANCE_DOC)
+    if _cls.__doc__:  # None under python -OO
+        _cls.__doc__ = _cls.__doc__.format(distance=_DISTANCE_DOC)
 
 
 class MultiScaleICP(RegistrationStep):
