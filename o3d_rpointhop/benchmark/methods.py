@@ -81,18 +81,23 @@ def _fpfh_recipe_inputs(source, target, voxel):
     return (*prepare(source), *prepare(target))
 
 
-def _fpfh_ransac(source, target, voxel, seed):
-    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel)
+def _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
+    """Open3D's RANSAC on feature matches, as in its global registration tutorial."""
     distance = 1.5 * voxel
     o3d.utility.random.seed(seed)
     result = reg.registration_ransac_based_on_feature_matching(
-        src, tgt, f_src, f_tgt, True, distance,
+        src, tgt, f_src, f_tgt, mutual_filter, distance,
         reg.TransformationEstimationPointToPoint(False), 3,
         [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
          reg.CorrespondenceCheckerBasedOnDistance(distance)],
         reg.RANSACConvergenceCriteria(100000, 0.999),
     )  # fmt: skip
     return np.array(result.transformation)
+
+
+def _fpfh_ransac(source, target, voxel, seed):
+    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel)
+    return _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=True)
 
 
 def open3d_recipe_descriptor():
@@ -111,16 +116,8 @@ def _rpointhop_open3d_ransac(source, target, voxel, seed, model):
     tgt = to_point_cloud(target).voxel_down_sample(voxel)
     f_src = to_open3d_feature(model.transform(src))
     f_tgt = to_open3d_feature(model.transform(tgt))
-    distance = 1.5 * voxel
-    o3d.utility.random.seed(seed)
-    result = reg.registration_ransac_based_on_feature_matching(
-        src, tgt, f_src, f_tgt, False, distance,
-        reg.TransformationEstimationPointToPoint(False), 3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
-         reg.CorrespondenceCheckerBasedOnDistance(distance)],
-        reg.RANSACConvergenceCriteria(100000, 0.999),
-    )  # fmt: skip
-    return np.array(result.transformation)
+    # mutual_filter=False: RANSAC does the filtering, and Open3D prints no fallback warning.
+    return _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=False)
 
 
 def _fpfh_fgr(source, target, voxel, seed):
