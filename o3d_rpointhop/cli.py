@@ -366,8 +366,8 @@ def _sample_pair(args: argparse.Namespace):
 
         try:
             scans = load_bunny(("bun000", "bun045"), args.data)
-        except FileNotFoundError:
-            pass
+        except FileNotFoundError as exc:
+            args.fallback_reason = str(exc)
         else:
             truth = scans["bun045"].relative_pose(scans["bun000"])
             return (
@@ -399,25 +399,59 @@ def cmd_demo(args: argparse.Namespace) -> int:
     write_cloud(out / "aligned.ply", to_point_cloud(source).transform(result.transformation))
     np.savetxt(out / "transform.txt", result.transformation, fmt="%.10f")
     picture = out / "before_after.png"
+    errors = None
+    if truth is not None:
+        errors = (rotation_error_deg(result.transformation, truth),
+                  translation_error(result.transformation, truth))  # fmt: skip
+    numbers = f"fitness {result.fitness:.3f}, {result.seconds:.2f} s"
+    if errors is not None:
+        numbers = f"error {errors[0]:.3f} deg / {errors[1]:.3g} (units of the data), " + numbers
     save_registration_png(
         source, target, result.transformation, picture,
-        title=f"{name}\nR-PointHop (pretrained) + RANSAC + ICP, {result.seconds:.2f} s",
+        title=f"{name}\nR-PointHop (pretrained) + RANSAC + ICP: {numbers}",
     )  # fmt: skip
     summary = {
         "pair": name,
+        "synthetic_fallback": getattr(args, "fallback_reason", None),
         "source_points": len(to_point_cloud(source).points),
         "target_points": len(to_point_cloud(target).points),
         "transformation": result.transformation.round(8).tolist(),
         "fitness": round(result.fitness, 4),
         "inlier_rmse": result.inlier_rmse,
+        "converged": result.converged,
+        "ambiguous": result.ambiguous,
         "seconds": round(result.seconds, 3),
         "steps": {s.name: round(s.seconds, 3) for s in result.steps},
         "outputs": [str(out / "aligned.ply"), str(out / "transform.txt"), str(picture)],
     }
-    if truth is not None:
-        summary["rotation_error_deg"] = round(rotation_error_deg(result.transformation, truth), 4)
-        summary["translation_error"] = translation_error(result.transformation, truth)
-    print(json.dumps(summary, indent=2))
+    if errors is not None:
+        summary["rotation_error_deg"] = round(errors[0], 4)
+        summary["translation_error"] = errors[1]
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return _flag_status(result)
+    lines = []
+    if summary["synthetic_fallback"]:
+        lines.append(
+            "No real data found, so the demo uses a synthetic object (set O3D_RPOINTHOP_DATA "
+            "or pass --data to register two Stanford Bunny scans)."
+        )
+    lines.append(f"Registered {name}")
+    lines.append(
+        f"  {summary['source_points']} -> {summary['target_points']} points, pretrained "
+        f"R-PointHop + RANSAC + ICP in {result.seconds:.2f} s"
+    )
+    if errors is not None:
+        lines.append(
+            f"  against the ground truth: rotation error {errors[0]:.3f} deg, translation "
+            f"error {errors[1]:.3g} (units of the data)"
+        )
+    lines.append(
+        f"  fitness {result.fitness:.3f}: share of source points within "
+        f"{result.distance:.3g} of the target"
+    )
+    lines.append(f"  wrote {', '.join(summary['outputs'])} (the picture: before and after)")
+    print("\n".join(lines))
     return _flag_status(result)
 
 
@@ -454,6 +488,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target", help="your own target cloud")
     p.add_argument("--data", help="data folder (default: $O3D_RPOINTHOP_DATA or ../shared/data)")
     p.add_argument("--synthetic", action="store_true", help="use the synthetic pair")
+    p.add_argument("--json", action="store_true", help="print the full result as JSON")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser(

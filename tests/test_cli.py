@@ -58,7 +58,7 @@ def test_fit_passes_hop_parameters(tmp_path):
 
 def test_demo_registers_the_synthetic_pair_and_draws_it(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["demo", "--synthetic", "--output-dir", str(out)]) == 0
+    assert main(["demo", "--synthetic", "--json", "--output-dir", str(out)]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["pair"].startswith("synthetic")
     assert summary["rotation_error_deg"] < 1.0 and summary["translation_error"] < 0.01
@@ -72,7 +72,10 @@ def test_demo_registers_the_synthetic_pair_and_draws_it(tmp_path, capsys):
 
 def test_demo_on_your_own_pair(tmp_path, capsys):
     src, tgt, truth = _pair(tmp_path)
-    assert main(["demo", "--source", src, "--target", tgt, "--output-dir", str(tmp_path)]) == 0
+    assert (
+        main(["demo", "--source", src, "--target", tgt, "--json", "--output-dir", str(tmp_path)])
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
     assert "rotation_error_deg" not in summary  # no ground truth for a user's pair
     np.testing.assert_allclose(np.array(summary["transformation"]), truth, atol=1e-5)
@@ -211,3 +214,13 @@ def test_register_usage_errors():
         with pytest.raises(SystemExit) as exc:
             main(args)
         assert exc.value.code == 2
+
+
+def test_demo_prints_a_human_summary_and_says_when_it_falls_back(tmp_path, capsys):
+    missing = tmp_path / "no-data-here"
+    missing.mkdir()
+    assert main(["demo", "--data", str(missing), "--output-dir", str(tmp_path / "o")]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("No real data found, so the demo uses a synthetic object")
+    assert "rotation error" in text and "fitness" in text and "before_after.png" in text
+    assert "{" not in text  # not JSON

@@ -94,7 +94,7 @@ def test_demo_uses_the_bunny_scans_when_the_data_is_there(shared_data, tmp_path,
 
     from o3d_rpointhop.cli import main
 
-    assert main(["demo", "--data", str(shared_data), "--output-dir", str(tmp_path)]) == 0
+    assert main(["demo", "--data", str(shared_data), "--json", "--output-dir", str(tmp_path)]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["pair"].startswith("Stanford Bunny")
     assert summary["rotation_error_deg"] < 2.0 and summary["translation_error"] < 0.002
