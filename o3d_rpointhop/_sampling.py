@@ -79,9 +79,11 @@ def poisson_disk_subset(points: np.ndarray, m: int) -> np.ndarray:
 def _thin(points: np.ndarray, m: int) -> np.ndarray:
     """One hard-core thinning of ``points`` down to (at most) ``m`` of them."""
     n = len(points)
+    if m >= n:
+        return np.arange(n, dtype=np.int64)
     k = min(_COMPETITORS, n - 1)
     if k < 1:
-        return np.arange(min(m, n), dtype=np.int64)
+        return np.arange(m, dtype=np.int64)
     idx, sq = knn(points, points, k + 1)
     idx, sq = idx[:, 1:], sq[:, 1:]  # leave out the point itself
     positive = sq[:, 0][sq[:, 0] > 0]
@@ -89,8 +91,6 @@ def _thin(points: np.ndarray, m: int) -> np.ndarray:
     priority = priorities(points, spacing)
     stronger = priority[idx] > priority[:, None]
     death = np.where(stronger, sq, np.inf).min(axis=1)
-    if m >= n:
-        return np.arange(n, dtype=np.int64)
     # The m largest death radii; ties (equal distances, and the local maxima's infinite
     # radii) by the higher priority: both move with the cloud.
     order = np.lexsort((-priority, -death))
