@@ -104,7 +104,15 @@ def test_every_method_runs(shapes):
     (pair,) = make_pairs(shapes[:1], "paper", seed=0)
     for name in METHODS:
         estimate, seconds = run_method(name, pair.source, pair.target, descriptor=model, voxel=0.05)
-        assert estimate.shape == (4, 4) and seconds > 0
+        rotation = estimate[:3, :3]
+        assert estimate.shape == (4, 4) and np.isfinite(seconds)
+        np.testing.assert_allclose(rotation.T @ rotation, np.eye(3), atol=1e-9)  # rigid
+        assert np.linalg.det(rotation) == pytest.approx(1.0) and estimate[3].tolist() == [
+            0,
+            0,
+            0,
+            1,
+        ]
         if name != "icp":  # a moved copy: every global method must find it
             assert pair_errors(estimate, pair.truth)["rotation_error_deg"] < 2.0, name
     with pytest.raises(ValueError, match="unknown method"):
