@@ -104,7 +104,7 @@ def _register_pair(
     voxel: float,
     seed: int,
 ):
-    """Scan ``source`` onto scan ``target``: matches, RANSAC, ICP, information matrix."""
+    """Scan ``source`` onto scan ``target``: matches, RANSAC, then :func:`_refine_edge`."""
     corr = find_correspondences(source_features, target_features)
     # Work about the target's centroid: survey-scale coordinates lose nothing.
     origin = target.mean(axis=0)
@@ -118,10 +118,25 @@ def _register_pair(
         seed=seed,
         clouds=(source_global - origin, target_global - origin),
     )
+    return _refine_edge(source, target, voxel, _about(origin, found.transformation))
+
+
+def _about(origin: np.ndarray, transformation: np.ndarray) -> np.ndarray:
+    """A transformation of coordinates centred on ``origin``, in the original ones."""
+    shift = np.eye(4)
+    shift[:3, 3] = origin
+    return shift @ transformation @ np.linalg.inv(shift)
+
+
+def _refine_edge(source: np.ndarray, target: np.ndarray, voxel: float, init: np.ndarray):
+    """ICP of ``source`` onto ``target`` from ``init``, about the target's centroid;
+    returns the transformation, its fitness at 1.5 resolutions (0 for an alignment whose
+    inliers spread like a chance one's) and Open3D's information matrix."""
+    origin = target.mean(axis=0)
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source - origin))
     tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target - origin))
     tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-    transformation = _icp(src, tgt, voxel, found.transformation)
+    transformation = _icp(src, tgt, voxel, _about(-origin, init))
     with repeatable_open3d():
         fitness = reg.evaluate_registration(src, tgt, 1.5 * voxel, transformation).fitness
         wide = SPREAD_DISTANCE * voxel
@@ -131,10 +146,7 @@ def _register_pair(
         information = reg.get_information_matrix_from_point_clouds(
             src, tgt, 1.5 * voxel, transformation
         )
-    shift = np.eye(4)
-    shift[:3, 3] = origin
-    world = shift @ transformation @ np.linalg.inv(shift)
-    return world, float(fitness), information
+    return _about(origin, transformation), float(fitness), information
 
 
 def _icp(source, target, voxel: float, init: np.ndarray) -> np.ndarray:
@@ -330,20 +342,14 @@ def register_multiway(
     tree = _spanning_tree(edges, len(points))
     poses = _poses_from_tree(tree, edges, len(points))
     graph, poses, kept = _optimise(edges, tree, poses, voxel)
-    # Final refinement: every kept edge again by ICP from the optimised poses.
+    # Final refinement: every kept edge again by ICP from the optimised poses (each
+    # keeps the fitness that made it an edge).
     refined = {}
     for i, j in kept:
-        relative = np.linalg.inv(poses[i]) @ poses[j]
-        origin = points[i].mean(axis=0)
-        shift = np.eye(4)
-        shift[:3, 3] = origin
-        src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[j] - origin))
-        tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[i] - origin))
-        tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-        local = _icp(src, tgt, voxel, np.linalg.inv(shift) @ relative @ shift)
-        with repeatable_open3d():
-            information = reg.get_information_matrix_from_point_clouds(src, tgt, 1.5 * voxel, local)
-        refined[(i, j)] = (shift @ local @ np.linalg.inv(shift), edges[(i, j)][1], information)
+        transformation, _, information = _refine_edge(
+            points[j], points[i], voxel, np.linalg.inv(poses[i]) @ poses[j]
+        )
+        refined[(i, j)] = (transformation, edges[(i, j)][1], information)
     if refined:
         tree = [e for e in tree if e in refined]
         graph, poses, kept = _optimise(refined, tree, poses, voxel)
