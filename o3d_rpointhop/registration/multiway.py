@@ -27,7 +27,7 @@ from ..correspondences import find_correspondences
 from ..fpfh import point_spacing
 from ._ransac import ransac
 from .pipeline import MAX_SPREAD, SPREAD_DISTANCE
-from .steps import repeatable_open3d
+from .steps import PointToPlaneICP, repeatable_open3d
 
 __all__ = ["MultiwayResult", "register_multiway"]
 
@@ -150,17 +150,20 @@ def _refine_edge(source: np.ndarray, target: np.ndarray, voxel: float, init: np.
 
 
 def _icp(source, target, voxel: float, init: np.ndarray) -> np.ndarray:
-    """Point-to-plane ICP at 2, then 0.5 resolutions (as ``register()``'s default)."""
+    """Point-to-plane ICP with ``register()``'s default schedule and criteria (those of
+    :class:`PointToPlaneICP`), on clouds that already carry target normals."""
+    step = PointToPlaneICP()
+    criteria = step._criteria()
     current = init
     with repeatable_open3d():
-        for distance in (2.0 * voxel, 0.5 * voxel):
+        for factor in step.distance_factors:
             current = reg.registration_icp(
                 source,
                 target,
-                distance,
+                factor * voxel,
                 current,
                 reg.TransformationEstimationPointToPlane(),
-                reg.ICPConvergenceCriteria(1e-6, 1e-6, 50),
+                criteria,
             ).transformation
     return np.array(current)
 
