@@ -14,12 +14,14 @@ from .registration import (
     RANSACGlobal,
     RegistrationPipeline,
     RegistrationResult,
+    RegistrationSettings,
     RegistrationStep,
     RegistrationWarning,
     SVDGlobal,
     SymmetryCheck,
     register,
     register_multiway,
+    registration_scorer,
 )
 from .rpointhop import RPointHopTransformer
 from .transforms import rigid_transform
@@ -36,6 +38,7 @@ __all__ = [
     "RPointHopTransformer",
     "RegistrationPipeline",
     "RegistrationResult",
+    "RegistrationSettings",
     "RegistrationStep",
     "RegistrationWarning",
     "SVDGlobal",
@@ -44,6 +47,7 @@ __all__ = [
     "find_correspondences",
     "register",
     "register_multiway",
+    "registration_scorer",
     "rigid_transform",
     "to_open3d_feature",
     "to_point_cloud",

@@ -12,7 +12,14 @@ import numpy as np
 import open3d as o3d
 import open3d.core as o3c
 
-__all__ = ["NeighborIndex", "knn", "drop_self", "fps_subsets", "invariant_start"]
+__all__ = [
+    "NeighborIndex",
+    "knn",
+    "drop_self",
+    "fps_subsets",
+    "invariant_start",
+    "point_spacing",
+]
 
 
 class NeighborIndex:
@@ -128,3 +135,13 @@ def fps_subsets(points: np.ndarray, sizes: list[int]) -> list[np.ndarray]:
         current = current[_fps(points[current], m, local_start)]
         out.append(current)
     return out
+
+
+def point_spacing(points: np.ndarray) -> float:
+    """Median distance from a point to its nearest neighbour."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    dist = np.asarray(cloud.compute_nearest_neighbor_distance())
+    positive = dist[dist > 0]
+    if positive.size == 0:
+        raise ValueError("the cloud has no spatial extent: all its points coincide")
+    return float(np.median(positive))

@@ -1,5 +1,8 @@
 """Model files: a plain ``.npz`` of numeric arrays plus JSON metadata, read without pickle.
 
+This module knows the file format, not the estimator: ``rpointhop.py`` imports it and
+hands over the model (or its class); nothing here imports ``rpointhop.py``.
+
 Layout (format version 2; version 1 files, without the PCA entries and the
 ``sampling`` and ``n_components`` parameters, still load)::
 
@@ -21,14 +24,11 @@ import numbers
 import zipfile
 from os import PathLike
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from ._version import __version__
-
-if TYPE_CHECKING:
-    from .rpointhop import RPointHopTransformer
 
 FORMAT_NAME = "o3d-rpointhop-model"
 FORMAT_VERSION = 2
@@ -48,7 +48,8 @@ _STORED_PARAMS = (
 )
 
 
-def save_model(model: RPointHopTransformer, path: str | PathLike) -> None:
+def save_model(model: Any, path: str | PathLike) -> None:
+    """Write a fitted ``RPointHopTransformer`` to ``path`` (exactly that name)."""
     params = {}
     for name in _STORED_PARAMS:
         value = getattr(model, name)
@@ -88,7 +89,8 @@ def _invalid(path, why: str) -> ValueError:
     return ValueError(f"{path} is not a valid {FORMAT_NAME} file: {why}")
 
 
-def load_model(cls: type[RPointHopTransformer], path: str | PathLike) -> RPointHopTransformer:
+def load_model(cls: type, path: str | PathLike) -> Any:
+    """An instance of ``cls`` (``RPointHopTransformer``) read from ``path``, no pickle."""
     if not Path(path).is_file():
         raise FileNotFoundError(f"no such model file: {path}")
     try:
@@ -114,7 +116,7 @@ def _entry(path, archive, key: str) -> np.ndarray:
         raise _invalid(path, f"entry {key!r} would need pickle to load ({exc})") from exc
 
 
-def _from_arrays(cls, path, archive) -> RPointHopTransformer:
+def _from_arrays(cls: type, path, archive) -> Any:
     try:
         meta = json.loads(str(_entry(path, archive, "metadata")[()]))
     except (ValueError, TypeError) as exc:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-__all__ = ["Correspondences", "find_correspondences", "nearest_descriptors"]
+__all__ = ["Correspondences", "count_of", "find_correspondences", "nearest_descriptors"]
 
 # Rows of the distance matrix computed at a time (bounded memory for large clouds).
 _CHUNK_ELEMENTS = 2**23
@@ -102,11 +102,19 @@ def nearest_descriptors(
     return indices, distances
 
 
-def _check_count(value, name: str) -> None:
-    if value is not None and not (
-        isinstance(value, numbers.Integral) and not isinstance(value, bool) and value >= 1
-    ):
-        raise ValueError(f"{name} must be None or a positive int, got {value!r}")
+def count_of(value: int | float, n: int, minimum: int = 1) -> int:
+    """A count given as an int, or as a share in (0, 1] of ``n`` (at least ``minimum``).
+
+    Raises
+    ------
+    ValueError
+        For anything else (a bool, zero, a negative number, a float above 1).
+    """
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool) and value >= 1:
+        return int(value)
+    if isinstance(value, numbers.Real) and not isinstance(value, bool) and 0 < value <= 1:
+        return max(minimum, int(round(float(value) * n)))
+    raise ValueError(f"a count must be an int >= 1 or a share in (0, 1], got {value!r}")
 
 
 def _check_positive(value, name: str) -> None:
@@ -118,11 +126,11 @@ def find_correspondences(
     source_features,
     target_features,
     *,
-    mutual: bool = False,
+    mutual_filter: bool = False,
     max_distance: float | None = None,
     max_ratio: float | None = None,
-    top_k: int | None = None,
-    top_k_ratio: int | None = None,
+    top_k: int | float | None = None,
+    top_k_ratio: int | float | None = None,
 ) -> Correspondences:
     """Match every source point to the target point with the nearest descriptor, then filter.
 
@@ -130,15 +138,18 @@ def find_correspondences(
     smallest descriptor distance (the paper's M1), then the ``top_k_ratio`` of those with
     the smallest ratio between the nearest and the second nearest distance (M2); or, by
     threshold, matches with distance at most ``max_distance`` (t1) and ratio at most
-    ``max_ratio`` (t2). ``mutual`` keeps only pairs that are each other's nearest.
+    ``max_ratio`` (t2). ``mutual_filter`` keeps only pairs that are each other's nearest
+    (Open3D's name for the filter).
 
     Parameters
     ----------
     source_features, target_features : array-like of shape (n, d) or open3d Feature
         Descriptors, one row per point (an Open3D ``Feature`` is read as ``data.T``).
-    mutual : bool, default=False
+    mutual_filter : bool, default=False
     max_distance, max_ratio : float, default=None
-    top_k, top_k_ratio : int, default=None
+    top_k, top_k_ratio : int or float, default=None
+        Counts: an int is a number of matches, a float in (0, 1] a share of the source
+        points (``top_k_ratio`` counts the matches kept by ratio test, not a ratio).
 
     Returns
     -------
@@ -159,8 +170,12 @@ def find_correspondences(
         raise ValueError(
             f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
         )
-    _check_count(top_k, "top_k")
-    _check_count(top_k_ratio, "top_k_ratio")
+    n = len(src)
+    try:
+        top_k = None if top_k is None else count_of(top_k, n)
+        top_k_ratio = None if top_k_ratio is None else count_of(top_k_ratio, n)
+    except ValueError as exc:
+        raise ValueError(f"top_k / top_k_ratio: {exc}") from None
     _check_positive(max_distance, "max_distance")
     _check_positive(max_ratio, "max_ratio")
 
@@ -171,7 +186,7 @@ def find_correspondences(
     ratio = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
     ratio[(d2 == 0) & (d1 == 0)] = 1.0  # two identical nearest descriptors: ambiguous
     keep = np.ones(len(src), dtype=bool)
-    if mutual:
+    if mutual_filter:
         back, _ = nearest_descriptors(tgt, src, k=1)
         keep &= back[nearest, 0] == np.arange(len(src))
     if max_distance is not None:

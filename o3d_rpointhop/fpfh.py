@@ -2,27 +2,21 @@
 
 from __future__ import annotations
 
-import numbers
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
 import open3d as o3d
 from sklearn.base import BaseEstimator, ClassNamePrefixFeaturesOutMixin, TransformerMixin
+from sklearn.utils._param_validation import Interval, StrOptions
 
+from ._neighbors import point_spacing
 from ._validation import as_cloud_list, describe_each, is_open3d_cloud
+from .registration.settings import RegistrationSettings
 
 __all__ = ["FPFHTransformer"]
 
 N_FPFH_FEATURES = 33
-
-
-def _radius(value: Any, name: str) -> float | str:
-    if isinstance(value, str) and value == "auto":
-        return value
-    if isinstance(value, numbers.Real) and not isinstance(value, bool) and np.isfinite(value):
-        if value > 0:
-            return float(value)
-    raise ValueError(f"{name} must be a positive number or 'auto', got {value!r}")
 
 
 def _open3d_normals(item: Any) -> np.ndarray | None:
@@ -31,16 +25,6 @@ def _open3d_normals(item: Any) -> np.ndarray | None:
     if hasattr(item, "has_normals"):  # legacy PointCloud
         return np.asarray(item.normals) if item.has_normals() else None
     return item.point.normals.cpu().numpy() if "normals" in item.point else None
-
-
-def point_spacing(points: np.ndarray) -> float:
-    """Median distance from a point to its nearest neighbour."""
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    dist = np.asarray(cloud.compute_nearest_neighbor_distance())
-    positive = dist[dist > 0]
-    if positive.size == 0:
-        raise ValueError("the cloud has no spatial extent: all its points coincide")
-    return float(np.median(positive))
 
 
 class FPFHTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstimator):
@@ -54,14 +38,16 @@ class FPFHTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEst
     Parameters
     ----------
     radius : float or "auto", default=0.25
-        Search radius of the histograms, in the cloud's units. ``"auto"`` uses five times
-        the cloud's median nearest-neighbour spacing (Open3D's tutorial ratio for a
-        voxel-downsampled cloud). The default suits ModelNet40-style objects in the unit
-        sphere with about 1000 points.
+        Search radius of the histograms, in the cloud's units. ``"auto"`` is the
+        ``feature_radius`` of :class:`~o3d_rpointhop.registration.RegistrationSettings`
+        at the cloud's median nearest-neighbour spacing: five times it (Open3D's
+        tutorial ratio for a voxel-downsampled cloud). The default suits
+        ModelNet40-style objects in the unit sphere with about 1000 points.
     max_nn : int, default=100
         Most neighbours used per histogram.
     normal_radius : float or "auto", default=0.1
-        Search radius for normal estimation; ``"auto"`` is twice the median spacing.
+        Search radius for normal estimation; ``"auto"`` is the settings'
+        ``normal_radius``, twice the median spacing.
     normal_max_nn : int, default=30
     use_existing_normals : bool, default=True
         Keep the normals of an Open3D point cloud that has them instead of re-estimating.
@@ -89,6 +75,16 @@ class FPFHTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEst
     (500, 33)
     """
 
+    _RADIUS = [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})]
+    _parameter_constraints = {
+        "radius": _RADIUS,
+        "max_nn": [Interval(Integral, 1, None, closed="left")],
+        "normal_radius": _RADIUS,
+        "normal_max_nn": [Interval(Integral, 1, None, closed="left")],
+        "use_existing_normals": ["boolean"],
+        "n_jobs": [None, Integral],
+    }
+
     def __init__(
         self,
         radius: float | str = 0.25,
@@ -106,14 +102,11 @@ class FPFHTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEst
         self.n_jobs = n_jobs
 
     def _check_params(self) -> None:
-        _radius(self.radius, "radius")
-        _radius(self.normal_radius, "normal_radius")
-        for name in ("max_nn", "normal_max_nn"):
+        self._validate_params()
+        for name in ("radius", "normal_radius"):
             value = getattr(self, name)
-            if not (isinstance(value, numbers.Integral) and not isinstance(value, bool)):
-                raise ValueError(f"{name} must be a positive int, got {value!r}")
-            if value < 1:
-                raise ValueError(f"{name} must be a positive int, got {value!r}")
+            if value != "auto" and not np.isfinite(value):
+                raise ValueError(f"{name} must be finite, got {value!r}")
 
     def fit(self, X: Any = None, y: Any = None) -> FPFHTransformer:
         """Check the parameters (and ``X`` if given); FPFH has nothing to learn, and
@@ -138,12 +131,11 @@ class FPFHTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEst
         return self
 
     def _describe(self, points: np.ndarray, normals: np.ndarray | None) -> np.ndarray:
-        radius = _radius(self.radius, "radius")
-        normal_radius = _radius(self.normal_radius, "normal_radius")
+        radius, normal_radius = self.radius, self.normal_radius
         if "auto" in (radius, normal_radius):
-            spacing = point_spacing(points)
-            radius = 5.0 * spacing if radius == "auto" else radius
-            normal_radius = 2.0 * spacing if normal_radius == "auto" else normal_radius
+            settings = RegistrationSettings().at(point_spacing(points))
+            radius = settings.feature_radius if radius == "auto" else radius
+            normal_radius = settings.normal_radius if normal_radius == "auto" else normal_radius
         cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
         if normals is not None:
             cloud.normals = o3d.utility.Vector3dVector(normals)

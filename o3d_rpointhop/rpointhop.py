@@ -14,6 +14,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from ._hops import CloudGeometry, HopConfig, build_geometry, is_int
+from ._persistence import load_model, save_model
 from ._progress import progress_bar
 from ._saab import MomentAccumulator, apply_saab, fit_saab
 from ._validation import as_cloud_list, describe_each
@@ -503,8 +504,6 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         path : str or path-like
             Destination, written exactly (no extension is added).
         """
-        from ._persistence import save_model
-
         check_is_fitted(self, "kernels_")
         save_model(self, path)
 
@@ -549,8 +548,6 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             If the file is not an o3d-rpointhop model, was written by a newer format
             version, or is damaged.
         """
-        from ._persistence import load_model
-
         return load_model(cls, path)
 
 

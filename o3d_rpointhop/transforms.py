@@ -10,6 +10,7 @@ __all__ = [
     "rotation_error_deg",
     "translation_error",
     "euler_angles_deg",
+    "random_rigid_motion",
 ]
 
 
@@ -89,3 +90,27 @@ def euler_angles_deg(transformation: np.ndarray) -> np.ndarray:
     from scipy.spatial.transform import Rotation
 
     return Rotation.from_matrix(np.asarray(transformation)[:3, :3]).as_euler("xyz", degrees=True)
+
+
+def random_rigid_motion(seed: int | None = None, max_translation: float = 1.0) -> np.ndarray:
+    """A random rigid motion: rotation uniform over SO(3), translation uniform in the cube
+    ``[-max_translation, max_translation]^3``.
+
+    Returns
+    -------
+    ndarray of shape (4, 4)
+
+    Examples
+    --------
+    >>> from o3d_rpointhop.transforms import random_rigid_motion
+    >>> motion = random_rigid_motion(seed=0)
+    >>> bool(abs(np.linalg.det(motion[:3, :3]) - 1.0) < 1e-12)
+    True
+    """
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    motion = np.eye(4)
+    motion[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+    motion[:3, 3] = rng.uniform(-max_translation, max_translation, 3)
+    return motion

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 import runpy
 import subprocess
@@ -13,16 +15,50 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _python_blocks(markdown: Path) -> list[str]:
-    return re.findall(r"```python\n(.*?)```", markdown.read_text(), flags=re.S)
+DATA_MARK = "<!-- test: needs shared data -->"
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
-def test_readme_python_runs(tmp_path, monkeypatch):
+def _python_blocks(markdown: Path) -> list[tuple[bool, str]]:
+    """Every python block of ``markdown``, and whether it is marked as needing the data."""
+    found = re.findall(r"(<!-- test: [^>]*-->\n)?```python\n(.*?)```", markdown.read_text(), re.S)
+    return [(DATA_MARK in mark, block) for mark, block in found]
+
+
+def _has_python(path: Path) -> bool:
+    return bool(_python_blocks(path))
+
+
+@pytest.mark.filterwarnings("ignore::o3d_rpointhop.RegistrationWarning")
+@pytest.mark.parametrize("document", [d for d in DOCUMENTS if _has_python(d)], ids=lambda p: p.name)
+def test_documented_python_runs(document, tmp_path, monkeypatch, request):
+    """Every python block of the README and the docs runs as written, in order, in one
+    namespace per document (blocks marked as needing the shared data run when it is
+    there)."""
     monkeypatch.chdir(tmp_path)
-    blocks = _python_blocks(ROOT / "README.md")
-    assert blocks
-    for block in blocks:
-        exec(compile(block, "README.md", "exec"), {})
+    namespace: dict = {"__name__": "__docs__"}
+    ran = 0
+    for k, (needs_data, block) in enumerate(_python_blocks(document)):
+        if needs_data:
+            try:
+                request.getfixturevalue("shared_data")
+            except pytest.skip.Exception:
+                continue
+        where = f"{document.name}, python block {k + 1}"
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            exec(compile(block, where, "exec"), namespace)
+        # "print(...)  # prints: text": the documented output is what the code prints.
+        printed = out.getvalue().splitlines()
+        for expected in re.findall(r"print\(.*\)\s+# prints: (.*)$", block, re.M):
+            assert expected.strip() in [line.strip() for line in printed], (where, printed)
+        ran += 1
+    assert ran > 0
+
+
+def test_every_document_with_code_is_tested():
+    unmarked_blocks = sum(1 for d in DOCUMENTS for needs, _ in _python_blocks(d) if not needs)
+    assert unmarked_blocks >= 15  # the README and docs carry their examples
 
 
 @pytest.mark.parametrize("script", sorted((ROOT / "examples").glob("*.py")), ids=lambda p: p.name)

@@ -136,12 +136,12 @@ def test_a_correct_estimate_is_kept_on_downsampled_clouds():
 def test_parameters_and_bad_values():
     step = SymmetryCheck(refine=PointToPointICP(max_iteration=5), margin=0.2)
     assert clone(step).get_params()["refine__max_iteration"] == 5
-    step.set_params(refine__max_iteration=7, threshold=0.1)
-    assert step.refine.max_iteration == 7 and step.threshold == 0.1
+    step.set_params(refine__max_iteration=7, max_correspondence_distance=0.1)
+    assert step.refine.max_iteration == 7 and step.max_correspondence_distance == 0.1
     context = RegistrationContext(box_surface(300, 0, False), box_surface(300, 1, False))
     for bad, match in [
         (dict(margin=1.5), "margin"),
-        (dict(threshold=-1.0), "threshold"),
+        (dict(max_correspondence_distance=-1.0), "max_correspondence_distance"),
         (dict(refine=RANSACGlobal()), "refine"),
         (dict(refine=SymmetryCheck()), "refine"),
     ]:

@@ -103,7 +103,9 @@ def match_inlier_ratio(context, descriptor, truth: np.ndarray, radius: float = 0
     src = np.asarray(context.global_cloud("source").points)
     tgt = np.asarray(context.global_cloud("target").points)
     corr = find_correspondences(
-        context.features(descriptor, "source"), context.features(descriptor, "target"), mutual=True
+        context.features(descriptor, "source"),
+        context.features(descriptor, "target"),
+        mutual_filter=True,
     )
     moved = apply_transform(src[corr.pairs[:, 0]], context.to_local(truth))
     return float((np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < radius).mean())

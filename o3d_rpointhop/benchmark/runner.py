@@ -12,7 +12,7 @@ import numpy as np
 
 from .._progress import progress_bar
 from ..open3d_interop import to_point_cloud
-from ..registration.context import resolve_voxel_size
+from ..registration.settings import resolve_voxel_size
 from ..rpointhop import RPointHopTransformer, default_descriptor
 from ..transforms import rotation_error_deg, translation_error
 from .methods import METHODS, run_method

@@ -8,24 +8,21 @@ clouds; :meth:`RegistrationContext.to_world` maps their transformations back.
 
 from __future__ import annotations
 
-import numbers
 import warnings
 from typing import Any
 
 import numpy as np
 import open3d as o3d
 
-from ..fpfh import point_spacing
 from ..open3d_interop import to_point_cloud
+from .settings import RegistrationSettings, resolve_voxel_size
 
-__all__ = ["RegistrationContext", "RegistrationWarning", "resolve_voxel_size"]
+__all__ = ["RegistrationContext", "RegistrationWarning", "check_geometry"]
 
 # A cloud whose second principal extent is below this share of its first is a line, and
 # whose third is below it, a plane (relative standard deviations).
 _COLLINEAR = 1e-6
 _PLANAR = 1e-4
-# Small clouds whose point spacings differ by more than this factor are downsampled.
-_DENSITY_RATIO = 0.5
 # float32 coordinates whose rounding step exceeds this share of the cloud's extent.
 _FLOAT32_RESOLUTION = 1e-5
 
@@ -92,46 +89,6 @@ def check_geometry(points: np.ndarray, name: str, raw: Any = None) -> None:
             )
 
 
-def resolve_voxel_size(
-    source: o3d.geometry.PointCloud,
-    target: o3d.geometry.PointCloud,
-    voxel_size: float | str,
-    n_global_points: int,
-) -> tuple[float, bool]:
-    """The resolution of a registration, and whether the global step downsamples.
-
-    ``"auto"``: clouds of at most ``n_global_points`` points are used as they are, and
-    the resolution is their point spacing (the larger of the two median
-    nearest-neighbour distances), unless one cloud is more than twice as dense as the
-    other (near-duplicate points, uneven sampling): then both are voxel-downsampled at
-    that resolution. Larger clouds are voxel-downsampled, with a voxel chosen so that
-    the larger cloud keeps about ``n_global_points`` points. A number is
-    used as the voxel size directly.
-    """
-    if isinstance(voxel_size, numbers.Real) and not isinstance(voxel_size, bool):
-        if not (np.isfinite(voxel_size) and voxel_size > 0):
-            raise ValueError(f"voxel_size must be positive, got {voxel_size!r}")
-        return float(voxel_size), True
-    if voxel_size != "auto":
-        raise ValueError(f"voxel_size must be 'auto' or a positive number, got {voxel_size!r}")
-    src, tgt = np.asarray(source.points), np.asarray(target.points)
-    spacings = point_spacing(src), point_spacing(tgt)
-    spacing = max(spacings)
-    largest = max(len(src), len(tgt))
-    if largest <= n_global_points:
-        # Descriptors compare neighbourhoods of k points: clouds of different density
-        # (near-duplicate points, uneven sampling) are evened out at the resolution.
-        return spacing, min(spacings) < _DENSITY_RATIO * spacing
-    # Surfaces: the point count falls with the square of the voxel size.
-    voxel = spacing * np.sqrt(largest / n_global_points)
-    for _ in range(10):
-        kept = max(len(c.voxel_down_sample(voxel).points) for c in (source, target))
-        if kept <= 1.15 * n_global_points:
-            break
-        voxel *= np.sqrt(kept / n_global_points)
-    return float(voxel), True
-
-
 class RegistrationContext:
     """Source, target, resolution and per-registration caches shared by the steps.
 
@@ -140,18 +97,22 @@ class RegistrationContext:
     source, target : array-like (n, 3) or Open3D point cloud
         Copied: the caller's objects are never modified.
     voxel_size : float or "auto"
-        See :func:`resolve_voxel_size`.
+        See :func:`~o3d_rpointhop.registration.settings.resolve_voxel_size`.
     n_global_points : int
         Size the global step aims for when it downsamples.
     seed : int
         Seeds every random choice (Open3D's RANSAC and FGR).
     descriptor : transformer or None
         Descriptor used by global steps that do not name their own.
+    settings : RegistrationSettings or None
+        The multiples of the resolution; ``None`` is ``RegistrationSettings()``.
 
     Attributes
     ----------
+    settings : RegistrationSettings
+        Bound to this registration's resolution: every distance a step is not given.
     voxel_size : float
-        The resolution: thresholds of the steps are multiples of it unless given.
+        The resolution (``settings.voxel_size``).
     downsampled : bool
         Whether the global step works on voxel-downsampled clouds.
     origin : ndarray of shape (3,)
@@ -168,6 +129,7 @@ class RegistrationContext:
         seed: int = 0,
         descriptor: Any = None,
         check: bool = True,
+        settings: RegistrationSettings | None = None,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
@@ -177,15 +139,22 @@ class RegistrationContext:
         if check:
             check_geometry(np.asarray(self.source.points), "source", source)
             check_geometry(np.asarray(self.target.points), "target", target)
-        self.voxel_size, self.downsampled = resolve_voxel_size(
+        voxel, self.downsampled = resolve_voxel_size(
             self.source, self.target, voxel_size, n_global_points
         )
+        if settings is not None and not isinstance(settings, RegistrationSettings):
+            raise ValueError(f"settings must be a RegistrationSettings, got {settings!r}")
+        self.settings = (settings or RegistrationSettings()).at(voxel)
         self.seed = int(seed)
         self.descriptor = descriptor
         self._global: dict[str, o3d.geometry.PointCloud] = {}
         self._features: dict[tuple[int, str], np.ndarray] = {}
         self._normals: dict[tuple, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
+
+    @property
+    def voxel_size(self) -> float:
+        return self.settings.voxel_size
 
     def to_world(self, transformation: np.ndarray) -> np.ndarray:
         """A centred-frame transformation in the caller's coordinates."""
@@ -225,6 +194,7 @@ class RegistrationContext:
                 seed=self.seed,
                 descriptor=self.descriptor,
                 check=False,
+                settings=self.settings,
             )
             # The same frame as this context (its clouds are centred already, but their
             # own centroid may differ slightly): transformations carry over unchanged.

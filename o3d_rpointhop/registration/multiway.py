@@ -21,13 +21,15 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from .._neighbors import point_spacing
 from .._validation import as_points
 from ..batch import _single_threaded, parallel_map
 from ..correspondences import find_correspondences
-from ..fpfh import point_spacing
 from ._ransac import ransac
-from .pipeline import MAX_SPREAD, SPREAD_DISTANCE
-from .steps import PointToPlaneICP, repeatable_open3d
+from .icp import PointToPlaneICP
+from .pipeline import MAX_SPREAD
+from .settings import RegistrationSettings
+from .steps import repeatable_open3d
 
 __all__ = ["MultiwayResult", "register_multiway"]
 
@@ -101,7 +103,7 @@ def _register_pair(
     target_global: np.ndarray,
     source_features: np.ndarray,
     target_features: np.ndarray,
-    voxel: float,
+    settings: RegistrationSettings,
     seed: int,
 ):
     """Scan ``source`` onto scan ``target``: matches, RANSAC, then :func:`_refine_edge`."""
@@ -111,14 +113,14 @@ def _register_pair(
     found = ransac(
         source_global[corr.pairs[:, 0]] - origin,
         target_global[corr.pairs[:, 1]] - origin,
-        1.5 * voxel,
+        settings.ransac_distance,
         max_iteration=1_000_000,
         confidence=0.999,
         edge_length=0.9,
         seed=seed,
         clouds=(source_global - origin, target_global - origin),
     )
-    return _refine_edge(source, target, voxel, _about(origin, found.transformation))
+    return _refine_edge(source, target, settings, _about(origin, found.transformation))
 
 
 def _about(origin: np.ndarray, transformation: np.ndarray) -> np.ndarray:
@@ -128,39 +130,39 @@ def _about(origin: np.ndarray, transformation: np.ndarray) -> np.ndarray:
     return shift @ transformation @ np.linalg.inv(shift)
 
 
-def _refine_edge(source: np.ndarray, target: np.ndarray, voxel: float, init: np.ndarray):
+def _refine_edge(source, target, settings: RegistrationSettings, init: np.ndarray):
     """ICP of ``source`` onto ``target`` from ``init``, about the target's centroid;
     returns the transformation, its fitness at 1.5 resolutions (0 for an alignment whose
     inliers spread like a chance one's) and Open3D's information matrix."""
     origin = target.mean(axis=0)
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source - origin))
     tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target - origin))
-    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-    transformation = _icp(src, tgt, voxel, _about(-origin, init))
+    search = o3d.geometry.KDTreeSearchParamHybrid(radius=settings.normal_radius, max_nn=30)
+    tgt.estimate_normals(search)
+    transformation = _icp(src, tgt, settings, _about(-origin, init))
+    edge = settings.edge_distance
     with repeatable_open3d():
-        fitness = reg.evaluate_registration(src, tgt, 1.5 * voxel, transformation).fitness
-        wide = SPREAD_DISTANCE * voxel
+        fitness = reg.evaluate_registration(src, tgt, edge, transformation).fitness
+        wide = settings.spread_distance
         spread = reg.evaluate_registration(src, tgt, wide, transformation).inlier_rmse / wide
         if spread > MAX_SPREAD:  # a chance alignment (see RegistrationResult.converged)
             fitness = 0.0
-        information = reg.get_information_matrix_from_point_clouds(
-            src, tgt, 1.5 * voxel, transformation
-        )
+        information = reg.get_information_matrix_from_point_clouds(src, tgt, edge, transformation)
     return _about(origin, transformation), float(fitness), information
 
 
-def _icp(source, target, voxel: float, init: np.ndarray) -> np.ndarray:
+def _icp(source, target, settings: RegistrationSettings, init: np.ndarray) -> np.ndarray:
     """Point-to-plane ICP with ``register()``'s default schedule and criteria (those of
     :class:`PointToPlaneICP`), on clouds that already carry target normals."""
     step = PointToPlaneICP()
-    criteria = step._criteria()
+    criteria = step.criteria()
     current = init
     with repeatable_open3d():
-        for factor in step.distance_factors:
+        for distance in settings.icp_distances:
             current = reg.registration_icp(
                 source,
                 target,
-                factor * voxel,
+                distance,
                 current,
                 reg.TransformationEstimationPointToPlane(),
                 criteria,
@@ -222,7 +224,7 @@ def _poses_from_tree(tree, edges, n: int) -> list:
     return poses
 
 
-def _optimise(edges: dict, tree: list, poses: list, voxel: float):
+def _optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettings):
     """Open3D's global optimisation over the connected scans; returns the graph, the
     optimised poses (None for unconnected scans) and the edges it kept."""
     nodes = [k for k, p in enumerate(poses) if p is not None]
@@ -243,7 +245,7 @@ def _optimise(edges: dict, tree: list, poses: list, voxel: float):
         )
         listed.append((i, j))
     option = reg.GlobalOptimizationOption(
-        max_correspondence_distance=1.5 * voxel,
+        max_correspondence_distance=settings.edge_distance,
         edge_prune_threshold=0.25,
         preference_loop_closure=1.0,
         reference_node=0,
@@ -276,6 +278,7 @@ def register_multiway(
     n_jobs: int | None = None,
     progress: bool | None = None,
     seed: int = 0,
+    settings: RegistrationSettings | None = None,
 ) -> MultiwayResult:
     """Poses of unposed scans of one object or scene, in scan 0's frame.
 
@@ -291,13 +294,16 @@ def register_multiway(
         The common resolution keeps about this many points of the largest scan.
     min_fitness : float, default=0.3
         A pair becomes an edge when ICP leaves at least this share of the source scan
-        within 1.5 resolutions of the target.
+        within the settings' ``edge_distance`` (1.5 resolutions) of the target.
     n_jobs : int, default=None
         Parallel pair registrations (joblib; a Dask cluster under
         ``joblib.parallel_config(backend="dask")``).
     progress : bool, default=None
         A bar on stderr over the pairs (``None``: when stderr is a terminal).
     seed : int, default=0
+    settings : RegistrationSettings, default=None
+        The multiples of the common resolution (RANSAC, ICP, normals, edges); ``None``
+        is ``RegistrationSettings()``.
 
     Returns
     -------
@@ -321,6 +327,9 @@ def register_multiway(
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     worker = _single_threaded(descriptor if descriptor is not None else default_descriptor())
     voxel = _common_voxel(points, n_global_points)
+    if settings is not None and not isinstance(settings, RegistrationSettings):
+        raise ValueError(f"settings must be a RegistrationSettings, got {settings!r}")
+    settings = (settings or RegistrationSettings()).at(voxel)
     prepared = parallel_map(
         _prepare, [(p, voxel, worker) for p in points], n_jobs=n_jobs, progress=progress,
         desc="describe", unit="scan",
@@ -331,7 +340,7 @@ def register_multiway(
         _register_pair,
         [
             (points[j], points[i], prepared[j][0], prepared[i][0], features[j], features[i],
-             voxel, seed)
+             settings, seed)
             for i, j in candidates
         ],
         n_jobs=n_jobs, progress=progress, desc="pairs", unit="pair",
@@ -344,18 +353,18 @@ def register_multiway(
     }
     tree = _spanning_tree(edges, len(points))
     poses = _poses_from_tree(tree, edges, len(points))
-    graph, poses, kept = _optimise(edges, tree, poses, voxel)
+    graph, poses, kept = _optimise(edges, tree, poses, settings)
     # Final refinement: every kept edge again by ICP from the optimised poses (each
     # keeps the fitness that made it an edge).
     refined = {}
     for i, j in kept:
         transformation, _, information = _refine_edge(
-            points[j], points[i], voxel, np.linalg.inv(poses[i]) @ poses[j]
+            points[j], points[i], settings, np.linalg.inv(poses[i]) @ poses[j]
         )
         refined[(i, j)] = (transformation, edges[(i, j)][1], information)
     if refined:
         tree = [e for e in tree if e in refined]
-        graph, poses, kept = _optimise(refined, tree, poses, voxel)
+        graph, poses, kept = _optimise(refined, tree, poses, settings)
     unconnected = [k for k, p in enumerate(poses) if p is None]
     return MultiwayResult(
         poses=poses,

@@ -2,28 +2,24 @@
 
 from __future__ import annotations
 
-import numbers
 import time
 import warnings
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
-from sklearn.base import BaseEstimator, clone
+from sklearn.base import clone
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils.metaestimators import _BaseComposition
+from sklearn.utils.validation import check_is_fitted
 
 from .context import RegistrationContext, RegistrationWarning
-from .steps import (
-    FGRGlobal,
-    GeneralizedICP,
-    MultiScaleICP,
-    PointToPlaneICP,
-    PointToPointICP,
-    RANSACGlobal,
-    RegistrationStep,
-    StepResult,
-    SVDGlobal,
-    evaluate,
-)
+from .global_estimators import FGRGlobal, RANSACGlobal, SVDGlobal
+from .icp import GeneralizedICP, MultiScaleICP, PointToPlaneICP, PointToPointICP
+from .scoring import check_pairs, registration_scorer
+from .settings import RegistrationSettings
+from .steps import RegistrationStep, StepResult, evaluate
 from .symmetry import SymmetryCheck, twin_transformations
 
 __all__ = [
@@ -60,8 +56,8 @@ class RegistrationResult:
         the full clouds; every step's own numbers are in ``steps``.
     inlier_rmse : float
         RMS distance of those inliers.
-    correspondences : ndarray of shape (m, 2)
-        Those inlier pairs ``(source index, target index)``.
+    correspondence_set : ndarray of shape (m, 2)
+        Those inlier pairs ``(source index, target index)``, as in Open3D.
     steps : list of StepResult
         Every step's transformation, fitness, inliers and timing, in order.
     voxel_size : float
@@ -91,18 +87,13 @@ class RegistrationResult:
     transformation: np.ndarray
     fitness: float
     inlier_rmse: float
-    correspondences: np.ndarray
+    correspondence_set: np.ndarray
     steps: list[StepResult] = field(default_factory=list)
     voxel_size: float = 0.0
     seconds: float = 0.0
     distance: float = 0.0
     converged: bool = True
     ambiguous: bool = False
-
-    @property
-    def correspondence_set(self) -> np.ndarray:
-        """Open3D's name for :attr:`correspondences`."""
-        return self.correspondences
 
     def to_open3d(self):
         """This result as an ``open3d.pipelines.registration.RegistrationResult``
@@ -114,7 +105,7 @@ class RegistrationResult:
         out.fitness = float(self.fitness)
         out.inlier_rmse = float(self.inlier_rmse)
         out.correspondence_set = o3d.utility.Vector2iVector(
-            np.asarray(self.correspondences, dtype=np.int32).reshape(-1, 2)
+            np.asarray(self.correspondence_set, dtype=np.int32).reshape(-1, 2)
         )
         return out
 
@@ -124,7 +115,7 @@ class RegistrationResult:
             "transformation": self.transformation.tolist(),
             "fitness": self.fitness,
             "inlier_rmse": self.inlier_rmse,
-            "n_correspondences": int(len(self.correspondences)),
+            "n_correspondences": int(len(self.correspondence_set)),
             "voxel_size": self.voxel_size,
             "distance": self.distance,
             "converged": self.converged,
@@ -150,28 +141,43 @@ def _check_steps(steps: Any) -> list[tuple[str, RegistrationStep]]:
     return list(steps)
 
 
-class RegistrationPipeline(BaseEstimator):
+class RegistrationPipeline(_BaseComposition):
     """A chain of registration steps, run in order: a global estimate, then refinements.
 
-    Like a scikit-learn ``Pipeline``, its steps are named and their parameters are
-    reachable as ``<step>__<parameter>`` through :meth:`get_params` / :meth:`set_params`;
-    it can be cloned.
+    Built on scikit-learn's composition machinery, like ``sklearn.pipeline.Pipeline``:
+    its steps are named, and every parameter of the steps and of the descriptor is
+    reachable as ``<step>__<parameter>`` or ``descriptor__<parameter>`` through
+    :meth:`get_params` / :meth:`set_params`, so ``clone`` and ``GridSearchCV`` work.
+    :meth:`register` aligns one pair; :meth:`fit`, :meth:`predict` and :meth:`score`
+    take a list of ``(source, target)`` pairs (and, for scoring, their true
+    transformations) so that the pipeline can be cross-validated.
 
     Parameters
     ----------
     steps : list of (str, RegistrationStep)
     descriptor : transformer, default=None
         Descriptor for global steps that do not name their own; ``None`` is the
-        pretrained R-PointHop model.
+        pretrained R-PointHop model. :meth:`fit` fits a clone of it on the pairs' clouds
+        (wrap a pretrained model in ``sklearn.frozen.FrozenEstimator`` to keep it as it
+        is); :meth:`register` uses the fitted clone after :meth:`fit`, the descriptor as
+        given before.
     voxel_size : float or "auto", default="auto"
         Resolution of the registration. ``"auto"``: clouds of up to ``n_global_points``
         points are used as they are, with their point spacing as the resolution; larger
         clouds are voxel-downsampled for the global step to about ``n_global_points``
-        points. ICP steps always use the full clouds. Distances the steps leave unset
-        are multiples of it.
+        points. ICP steps always use the full clouds.
     n_global_points : int, default=2048
     seed : int, default=0
         Seeds the random parts (RANSAC, FGR): results are repeatable.
+    settings : RegistrationSettings, default=None
+        The multiples of the resolution that distances the steps leave unset are
+        derived from; ``None`` is ``RegistrationSettings()``.
+
+    Attributes
+    ----------
+    descriptor_ : transformer
+        After :meth:`fit`: the descriptor fitted on the pairs' clouds (the pretrained
+        model when ``descriptor`` is None).
 
     Examples
     --------
@@ -181,6 +187,15 @@ class RegistrationPipeline(BaseEstimator):
     100
     """
 
+    _parameter_constraints = {
+        "steps": [list],
+        "descriptor": [None, HasMethods(["transform"])],
+        "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
+        "n_global_points": [Interval(Integral, 3, None, closed="left")],
+        "seed": [Interval(Integral, 0, None, closed="left")],
+        "settings": [None, RegistrationSettings],
+    }
+
     def __init__(
         self,
         steps: list[tuple[str, RegistrationStep]],
@@ -188,43 +203,98 @@ class RegistrationPipeline(BaseEstimator):
         voxel_size: float | str = "auto",
         n_global_points: int = 2048,
         seed: int = 0,
+        settings: RegistrationSettings | None = None,
     ) -> None:
         self.steps = steps
         self.descriptor = descriptor
         self.voxel_size = voxel_size
         self.n_global_points = n_global_points
         self.seed = seed
+        self.settings = settings
 
     @property
     def named_steps(self) -> dict[str, RegistrationStep]:
         return dict(_check_steps(self.steps))
 
     def get_params(self, deep: bool = True) -> dict:
-        params = super().get_params(deep=False)
-        if deep:
-            for name, step in self.steps:
-                params[name] = step
-                for key, value in step.get_params(deep=True).items():
-                    params[f"{name}__{key}"] = value
-        return params
+        """Parameters of the pipeline, and with ``deep`` those of its steps
+        (``<step>__<parameter>``) and of the descriptor (``descriptor__<parameter>``)."""
+        return self._get_params("steps", deep=deep)
 
     def set_params(self, **params) -> RegistrationPipeline:
-        steps = list(self.steps)
-        names = [name for name, _ in steps]
-        for name in [k for k in params if k in names]:
-            steps[names.index(name)] = (name, params.pop(name))
-        self.steps = steps
-        nested: dict[str, dict] = {}
-        for key in list(params):
-            if "__" in key:
-                name, sub = key.split("__", 1)
-                if name not in names:
-                    raise ValueError(f"no step named {name!r} (steps: {names})")
-                nested.setdefault(name, {})[sub] = params.pop(key)
-        super().set_params(**params)
-        for name, sub in nested.items():
-            dict(self.steps)[name].set_params(**sub)
+        """Set parameters, including ``<step>__<parameter>`` and whole steps by name."""
+        names = [name for name, _ in _check_steps(self.steps)]
+        for key in params:
+            head = key.split("__", 1)[0]
+            if "__" in key and head not in names and head not in self._parameter_constraints:
+                raise ValueError(f"no step named {head!r} (steps: {names})")
+        self._set_params("steps", **params)
         return self
+
+    def _check(self) -> list[tuple[str, RegistrationStep]]:
+        self._validate_params()
+        return _check_steps(self.steps)
+
+    def fit(self, X: Any, y: Any = None) -> RegistrationPipeline:
+        """Fit a clone of the descriptor on the clouds of the pairs ``X``.
+
+        Parameters
+        ----------
+        X : list of (source, target)
+            Pairs of clouds (arrays or Open3D clouds).
+        y : ignored
+            The true transformations are only needed by :meth:`score`.
+
+        Returns
+        -------
+        self : RegistrationPipeline
+        """
+        self._check()
+        pairs = check_pairs(X)
+        if self.descriptor is None:
+            from ..rpointhop import default_descriptor
+
+            self.descriptor_ = default_descriptor()
+        else:
+            clouds = [cloud for pair in pairs for cloud in pair]
+            self.descriptor_ = clone(self.descriptor).fit(clouds, None)
+        return self
+
+    def predict(self, X: Any) -> np.ndarray:
+        """The source-to-target transformation of every pair.
+
+        Parameters
+        ----------
+        X : list of (source, target)
+
+        Returns
+        -------
+        ndarray of shape (n_pairs, 4, 4)
+        """
+        check_is_fitted(self, "descriptor_")
+        return np.stack([result.transformation for result in self.register_pairs(X)])
+
+    def register_pairs(self, X: Any) -> list[RegistrationResult]:
+        """:meth:`register` for every ``(source, target)`` pair of ``X``, in order."""
+        with warnings.catch_warnings():  # the flags are on the results
+            warnings.simplefilter("ignore", RegistrationWarning)
+            return [self.register(source, target) for source, target in check_pairs(X)]
+
+    def score(self, X: Any, y: Any) -> float:
+        """Registration recall: the share of pairs registered within 5 deg and two
+        resolutions of their true transformation (:func:`registration_scorer`'s defaults).
+
+        Parameters
+        ----------
+        X : list of (source, target)
+        y : array-like of shape (n_pairs, 4, 4)
+            True source-to-target transformations.
+
+        Returns
+        -------
+        float
+        """
+        return registration_scorer()(self, X, y)
 
     def register(self, source: Any, target: Any, init: np.ndarray | None = None):
         """Align ``source`` to ``target``.
@@ -242,9 +312,7 @@ class RegistrationPipeline(BaseEstimator):
         -------
         RegistrationResult
         """
-        steps = _check_steps(self.steps)
-        if not (isinstance(self.n_global_points, numbers.Integral) and self.n_global_points >= 3):
-            raise ValueError(f"n_global_points must be an int >= 3, got {self.n_global_points!r}")
+        steps = self._check()
         start = time.perf_counter()
         context = RegistrationContext(
             source,
@@ -252,7 +320,8 @@ class RegistrationPipeline(BaseEstimator):
             voxel_size=self.voxel_size,
             n_global_points=self.n_global_points,
             seed=self.seed,
-            descriptor=self.descriptor,
+            descriptor=getattr(self, "descriptor_", self.descriptor),
+            settings=self.settings,
         )
         current = np.eye(4) if init is None else context.to_local(_check_transformation(init))
         results = []
@@ -270,7 +339,7 @@ class RegistrationPipeline(BaseEstimator):
             results.append(outcome)
         distance = results[-1].distance
         final = evaluate(context, current, distance)
-        wide = max(distance, SPREAD_DISTANCE * context.voxel_size)
+        wide = max(distance, context.settings.spread_distance)
         spread = evaluate(context, current, wide).inlier_rmse / wide
         converged = final.fitness >= MIN_FITNESS and spread <= MAX_SPREAD
         ambiguous = converged and _ambiguous(context, current, wide)
@@ -294,7 +363,7 @@ class RegistrationPipeline(BaseEstimator):
             transformation=context.to_world(current),
             fitness=final.fitness,
             inlier_rmse=final.inlier_rmse,
-            correspondences=final.correspondences,
+            correspondence_set=final.correspondence_set,
             steps=results,
             voxel_size=context.voxel_size,
             seconds=time.perf_counter() - start,
@@ -306,9 +375,8 @@ class RegistrationPipeline(BaseEstimator):
 
 #: Fitness below which a result is flagged as not converged.
 MIN_FITNESS = 0.02
-#: Inlier RMSE within SPREAD_DISTANCE resolutions, as a share of that distance, above
-#: which a result is flagged as not converged (a chance alignment).
-SPREAD_DISTANCE = 3.0
+#: Inlier RMSE within the settings' ``spread_distance`` (3 resolutions), as a share of
+#: that distance, above which a result is flagged as not converged (a chance alignment).
 MAX_SPREAD = 0.47
 #: A 180-degree twin with at least this share of the result's fitness makes it ambiguous.
 AMBIGUITY_RATIO = 0.9
@@ -357,6 +425,7 @@ def register(
     n_global_points: int = 2048,
     init: np.ndarray | None = None,
     seed: int = 0,
+    settings: RegistrationSettings | None = None,
 ) -> RegistrationResult:
     """Register ``source`` to ``target``: a global estimate from descriptors, then ICP.
 
@@ -382,6 +451,10 @@ def register(
     init : ndarray of shape (4, 4), default=None
         Start for ICP when there is no global step.
     seed : int, default=0
+    settings : RegistrationSettings, default=None
+        The multiples of the resolution every unset distance is derived from (RANSAC's
+        inlier distance, ICP's passes, the normals' radius, ...); ``None`` is
+        ``RegistrationSettings()``.
 
     Returns
     -------
@@ -417,5 +490,6 @@ def register(
         voxel_size=voxel_size,
         n_global_points=n_global_points,
         seed=seed,
+        settings=settings,
     )
     return pipeline.register(source, target, init=init)

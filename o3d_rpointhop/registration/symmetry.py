@@ -10,14 +10,15 @@ symmetric the twins fit equally well and the estimate is kept.
 
 from __future__ import annotations
 
-import numbers
-import time
+from numbers import Real
 
 import numpy as np
 from sklearn.base import clone
+from sklearn.utils._param_validation import HasMethods, Interval
 
 from .context import RegistrationContext
-from .steps import PointToPlaneICP, RegistrationStep, StepResult, _distance, evaluate
+from .icp import PointToPlaneICP
+from .steps import OPTIONAL_DISTANCE, RegistrationStep, StepResult, evaluate
 
 __all__ = ["SymmetryCheck", "fits_better", "twin_transformations", "truncated_cost"]
 
@@ -82,10 +83,11 @@ class SymmetryCheck(RegistrationStep):
     Runs after a refinement step. The incoming estimate and its three twins (turned by
     180 degrees about each principal axis of the moved source, see
     :func:`twin_transformations`) are each refined with ``refine`` on the global step's
-    clouds (cheap: about ``n_global_points`` points) and measured there at
-    ``threshold``. A twin replaces the estimate only when it fits better on every count
-    (:func:`fits_better`: fitness no lower, inlier RMSE no higher, mean truncated squared
-    residual lower by more than ``margin``), so an exactly symmetric shape keeps the
+    clouds (cheap: about ``n_global_points`` points) and measured there within
+    ``max_correspondence_distance``. A twin replaces the estimate only when it fits
+    better on every count (:func:`fits_better`: fitness no lower, inlier RMSE no higher,
+    mean truncated squared residual lower by more than ``margin``), so an exactly
+    symmetric shape keeps the
     global step's choice, and so does a partial overlap where a twin covers more of the
     other cloud but less closely; the winning twin is then refined on the full clouds.
 
@@ -98,39 +100,41 @@ class SymmetryCheck(RegistrationStep):
     refine : RegistrationStep, default=None
         How each candidate is refined; ``None`` is :class:`PointToPlaneICP` with its
         defaults. Clones are used.
-    threshold : float, default=None
-        Truncation distance of the score; ``None`` is ``2 x voxel_size`` (the distance
-        of ICP's first pass).
+    max_correspondence_distance : float, default=None
+        Truncation distance of the score; ``None`` is the settings'
+        ``symmetry_distance``, 2 x ``voxel_size`` (the distance of ICP's first pass).
     margin : float, default=0.1
         Relative improvement of the truncated cost a twin needs to replace the estimate.
     """
 
+    _parameter_constraints = {
+        "refine": [None, HasMethods(["run"])],
+        "max_correspondence_distance": OPTIONAL_DISTANCE,
+        "margin": [Interval(Real, 0, 1, closed="left")],
+    }
+
     def __init__(
         self,
         refine: RegistrationStep | None = None,
-        threshold: float | None = None,
+        max_correspondence_distance: float | None = None,
         margin: float = 0.1,
     ) -> None:
         self.refine = refine
-        self.threshold = threshold
+        self.max_correspondence_distance = max_correspondence_distance
         self.margin = margin
 
-    def _check(self, context: RegistrationContext) -> tuple[RegistrationStep, float, float]:
+    def _refinement(self) -> RegistrationStep:
         refine = PointToPlaneICP() if self.refine is None else self.refine
         if not isinstance(refine, RegistrationStep) or refine.kind != "refine":
             raise ValueError(f"refine must be None or a refinement step, got {self.refine!r}")
         if isinstance(refine, SymmetryCheck):
             raise ValueError("refine must not be another SymmetryCheck")
-        threshold = _distance(self.threshold, 2.0, context, "threshold")
-        margin = self.margin
-        if not (isinstance(margin, numbers.Real) and 0 <= margin < 1):
-            raise ValueError(f"margin must be a number in [0, 1), got {margin!r}")
-        return clone(refine), threshold, float(margin)
+        return clone(refine)
 
-    def run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
-        start = time.perf_counter()
-        refine, threshold, margin = self._check(context)
-        current = np.asarray(transformation, dtype=np.float64)
+    def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
+        refine, margin = self._refinement(), float(self.margin)
+        threshold = self.max_correspondence_distance or context.settings.symmetry_distance
+        current = transformation
         coarse = context.coarse()
         starts = [current, *twin_transformations(np.asarray(coarse.source.points), current)]
         refined = [refine.run(coarse, candidate).transformation for candidate in starts]
@@ -148,6 +152,9 @@ class SymmetryCheck(RegistrationStep):
                 current = refine.run(context, current).transformation
         result = evaluate(context, current, threshold)
         result.name = "symmetry_check"
-        result.seconds = time.perf_counter() - start
-        result.info = {"threshold": threshold, "costs": costs, "chosen_twin": chosen}
+        result.info = {
+            "max_correspondence_distance": threshold,
+            "costs": costs,
+            "chosen_twin": chosen,
+        }
         return result
