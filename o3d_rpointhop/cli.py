@@ -229,14 +229,11 @@ def _flag_status(result) -> int:
 
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
+    from .benchmark.bunny import run_bunny
     from .benchmark.methods import METHODS
-    from .benchmark.runner import (
-        MODELNET40_PROTOCOLS,
-        run_3dmatch,
-        run_bunny,
-        run_modelnet40,
-        write_report,
-    )
+    from .benchmark.modelnet40 import MODELNET40_PROTOCOLS, run_modelnet40
+    from .benchmark.report import markdown, write_report
+    from .benchmark.threedmatch import run_3dmatch
     from .rpointhop import default_descriptor
 
     if args.dataset == "multiway":
@@ -254,7 +251,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
             raise CommandError("3dmatch has no protocols to choose")
         results = run_3dmatch(methods, max_pairs=args.max_pairs, **common)
     paths = write_report(results, args.output)
-    print(Path(paths[1]).read_text())
+    print(markdown(results))  # with the timings: the terminal is not a result file
     print("written: " + ", ".join(paths))
     return 0
 
@@ -318,7 +315,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
 
 def _benchmark_multiway(args: argparse.Namespace) -> int:
-    from .benchmark.multiway import OBJECTS, markdown, plot_reconstruction, run_multiway
+    from .benchmark.multiway import (
+        OBJECTS,
+        markdown,
+        plot_reconstruction,
+        run_multiway,
+        timings_markdown,
+    )
+    from .benchmark.report import split_timings
 
     objects = args.protocol or list(OBJECTS)
     unknown = [o for o in objects if o not in OBJECTS]
@@ -334,13 +338,17 @@ def _benchmark_multiway(args: argparse.Namespace) -> int:
             plot_reconstruction(entry, method, path, f"{name}: {method}, scans by colour")
             written.append(str(path))
         del entry["moved"]
-    (folder / "multiway.json").write_text(json.dumps(results, indent=1))
-    (folder / "multiway.md").write_text(markdown(results))
-    print((folder / "multiway.md").read_text())
-    print(
-        "written: "
-        + ", ".join([str(folder / "multiway.json"), str(folder / "multiway.md"), *written])
-    )
+    kept, timed = split_timings(results)
+    files = {
+        "multiway.json": json.dumps(kept, indent=1) + "\n",
+        "multiway.md": markdown(kept),
+        "multiway_timings.json": json.dumps(timed, indent=1) + "\n",
+        "multiway_timings.md": timings_markdown(results),
+    }
+    for name, text in files.items():
+        (folder / name).write_text(text)
+    print(markdown(results))
+    print("written: " + ", ".join([*(str(folder / n) for n in files), *written]))
     return EXIT_OK
 
 

@@ -7,7 +7,6 @@ is absent.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -15,18 +14,16 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop.datasets import make_blob
-
-SHARED_DATA = Path(
-    os.environ.get("O3D_RPOINTHOP_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
-)
+from o3d_rpointhop.datasets import data_home, make_blob
 
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
-    if not SHARED_DATA.is_dir():
-        pytest.skip(f"real data not found at {SHARED_DATA}")
-    return SHARED_DATA
+    """The real data folder (``data_home()``'s lookup); skips the test without it."""
+    try:
+        return data_home()
+    except FileNotFoundError as exc:
+        pytest.skip(f"real data not found: {exc}")
 
 
 @pytest.fixture(scope="session")
@@ -61,3 +58,26 @@ def relative_difference(a: np.ndarray, b: np.ndarray) -> float:
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     return float(np.abs(a - b).max() / np.abs(a - a.mean(axis=0)).max())
+
+
+# Checks of sklearn's suite that cannot apply to a point-cloud transformer, and why.
+NOT_APPLICABLE = {
+    name: "feeds data with 2, 4, 5 or 10 columns; the input is xyz points, exactly 3 columns"
+    for name in (
+        "check_estimators_overwrite_params",
+        "check_estimators_fit_returns_self",
+        "check_readonly_memmap_input",
+        "check_n_features_in_after_fitting",
+        "check_positive_only_tag_during_fit",
+        "check_estimators_dtypes",
+        "check_dtype_object",
+        "check_fit_idempotent",
+        "check_fit_check_is_fitted",
+        "check_n_features_in",
+        "check_fit2d_1sample",
+    )
+}
+NOT_APPLICABLE["check_methods_subset_invariance"] = (
+    "transforms rows one at a time and expects the same result as for the whole set; a "
+    "point's descriptor is computed from its neighbours, so a one-point cloud has none"
+)

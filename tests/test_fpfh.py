@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
+from conftest import NOT_APPLICABLE
 from sklearn.base import clone
+from sklearn.utils.estimator_checks import check_estimator
 
 from o3d_rpointhop import FPFHTransformer
 from o3d_rpointhop.datasets import make_object
@@ -75,3 +77,40 @@ def test_bad_input():
         FPFHTransformer().transform(np.full((50, 3), np.nan))
     with pytest.raises(ValueError, match="no spatial extent"):
         FPFHTransformer(radius="auto").transform(np.zeros((50, 3)))
+
+
+# FPFH learns nothing and transforms without fit, so sklearn also runs its stateless
+# check, which feeds 5 columns like the others listed.
+FPFH_NOT_APPLICABLE = {
+    **NOT_APPLICABLE,
+    "check_transformers_unfitted_stateless": NOT_APPLICABLE["check_n_features_in"],
+}
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")
+def test_sklearn_check_estimator():
+    results = check_estimator(
+        FPFHTransformer(radius=0.5, normal_radius=0.5, max_nn=10, normal_max_nn=10),
+        expected_failed_checks=FPFH_NOT_APPLICABLE,
+        on_fail=None,
+    )
+    failed = [
+        (r["check_name"], str(r["exception"])[:200]) for r in results if r["status"] == "failed"
+    ]
+    assert failed == []
+    xfailed = {r["check_name"] for r in results if r["status"] == "xfail"}
+    assert xfailed == set(FPFH_NOT_APPLICABLE)
+    assert sum(r["status"] == "passed" for r in results) >= 30
+
+
+def test_parameters_are_validated_declaratively():
+    cloud = make_object(300)
+    for bad, name in [
+        (dict(radius=-1.0), "radius"),
+        (dict(radius="big"), "radius"),
+        (dict(max_nn=0), "max_nn"),
+        (dict(normal_radius=float("inf")), "normal_radius"),
+        (dict(use_existing_normals="yes"), "use_existing_normals"),
+    ]:
+        with pytest.raises(ValueError, match=name):
+            FPFHTransformer(**bad).transform(cloud)

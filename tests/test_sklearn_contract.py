@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import NOT_APPLICABLE
 from sklearn.base import clone
 from sklearn.decomposition import PCA
 from sklearn.exceptions import NotFittedError
@@ -13,30 +14,6 @@ from sklearn.utils.estimator_checks import check_estimator
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import make_blob
-
-# Checks of sklearn's suite that cannot apply to a point-cloud transformer, and why.
-# The estimator is checked with small neighbourhoods so that the suite's 20-100 row
-# datasets are large enough clouds.
-NOT_APPLICABLE = {
-    name: "feeds data with 2, 4, 5 or 10 columns; the input is xyz points, exactly 3 columns"
-    for name in (
-        "check_estimators_overwrite_params",
-        "check_estimators_fit_returns_self",
-        "check_readonly_memmap_input",
-        "check_n_features_in_after_fitting",
-        "check_positive_only_tag_during_fit",
-        "check_estimators_dtypes",
-        "check_dtype_object",
-        "check_fit_idempotent",
-        "check_fit_check_is_fitted",
-        "check_n_features_in",
-        "check_fit2d_1sample",
-    )
-}
-NOT_APPLICABLE["check_methods_subset_invariance"] = (
-    "transforms rows one at a time and expects the same result as for the whole set; a "
-    "point's descriptor is computed from its neighbours, so a one-point cloud has none"
-)
 
 SMALL = dict(n_neighbors=(4, 3), hop_sizes=(1.0, 0.5), lrf_neighbors=5)
 
