@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Sequence
+from numbers import Integral, Real
 from os import PathLike
 from typing import Any
 
@@ -11,9 +11,10 @@ import numpy as np
 from joblib import Parallel, delayed, effective_n_jobs
 from sklearn.base import BaseEstimator, ClassNamePrefixFeaturesOutMixin, TransformerMixin
 from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from ._hops import CloudGeometry, HopConfig, build_geometry, is_int
+from ._hops import SAMPLING_METHODS, CloudGeometry, HopConfig, build_geometry
 from ._persistence import load_model, save_model
 from ._progress import progress_bar
 from ._saab import MomentAccumulator, apply_saab, fit_saab
@@ -155,6 +156,20 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
     256
     """
 
+    _parameter_constraints = {
+        "n_neighbors": ["array-like"],
+        "hop_sizes": ["array-like"],
+        "lrf_neighbors": [Interval(Integral, 3, None, closed="left")],
+        "energy_threshold": [Interval(Real, 0, 1, closed="left")],
+        "scale": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
+        "fit_subsample": [None, Interval(Integral, 1, None, closed="left")],
+        "sampling": [StrOptions(set(SAMPLING_METHODS))],
+        "n_components": [None, Interval(Integral, 1, None, closed="left")],
+        "progress": [None, "boolean"],
+        "n_jobs": [None, Integral],
+        "random_state": ["random_state"],
+    }
+
     def __init__(
         self,
         n_neighbors: Sequence[int] = (64, 32, 48, 48),
@@ -183,25 +198,13 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
 
     # ------------------------------------------------------------------ parameters
     def _hop_config(self) -> HopConfig:
-        """Validate every parameter; return the ones that shape the hops."""
-        config = HopConfig.from_params(
+        """Validate every parameter (declaratively, then the ones that depend on each
+        other: one hop size per neighbourhood size, sizes that do not grow); return the
+        ones that shape the hops."""
+        self._validate_params()
+        return HopConfig.from_params(
             self.n_neighbors, self.hop_sizes, self.lrf_neighbors, self.scale, self.sampling
         )
-        if not (
-            isinstance(self.energy_threshold, numbers.Real) and 0.0 <= self.energy_threshold < 1.0
-        ):
-            raise ValueError(f"energy_threshold must be in [0, 1), got {self.energy_threshold!r}")
-        if self.fit_subsample is not None and not is_int(self.fit_subsample, 1):
-            raise ValueError(
-                f"fit_subsample must be None or a positive int, got {self.fit_subsample!r}"
-            )
-        if self.n_components is not None and not is_int(self.n_components, 1):
-            raise ValueError(
-                f"n_components must be None or a positive int, got {self.n_components!r}"
-            )
-        if self.progress not in (None, True, False):
-            raise ValueError(f"progress must be None, True or False, got {self.progress!r}")
-        return config
 
     def _check_sizes(self, clouds: list[np.ndarray], config: HopConfig, kind: str) -> None:
         for i, cloud in enumerate(clouds):
