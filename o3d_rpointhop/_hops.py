@@ -4,7 +4,9 @@ The geometry of a cloud (its local reference frames, hop samples,
 neighbourhoods and octant memberships) does not depend on the learned kernels. It is
 computed once per cloud by :func:`build_geometry` and reduced to
 
-* the 24-D hop-1 attributes (octant means of neighbour coordinates), and
+* the hop-1 attributes: octant means of the neighbours' coordinates (24-D), and with
+  the scene variant's ``attributes`` also of their normals and eigenvalue features
+  (:mod:`o3d_rpointhop._attributes`), and
 * for every later hop, an :class:`~o3d_rpointhop._octants.OctantPooling` operator that
   maps the previous hop's per-point features to the octant means of each query's
   neighbourhood.
@@ -29,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from ._attributes import ATTRIBUTE_CHANNELS, check_attributes, eigen_features
 from ._lrf import local_reference_frames, project
 from ._neighbors import NeighborIndex, drop_self
-from ._octants import OctantPooling, coordinate_octant_means, octant_index
+from ._octants import N_OCTANTS, OctantPooling, coordinate_octant_means, octant_index, octant_means
 from ._sampling import hop_subsets
 
 __all__ = ["CloudGeometry", "HopConfig", "build_geometry", "cloud_scale", "SAMPLING_METHODS"]
@@ -64,6 +67,12 @@ class HopConfig:
     lrf_neighbors: int
     scale: str | float
     sampling: str = "auto"
+    attributes: tuple[str, ...] = ("xyz",)
+
+    @property
+    def hop1_dim(self) -> int:
+        """Length of the hop-1 input: eight octant means per attribute channel."""
+        return N_OCTANTS * sum(ATTRIBUTE_CHANNELS[a] for a in self.attributes)
 
     @classmethod
     def from_params(
@@ -73,6 +82,7 @@ class HopConfig:
         lrf_neighbors: Any,
         scale: Any,
         sampling: Any = "auto",
+        attributes: Any = ("xyz",),
     ) -> HopConfig:
         """Validate the estimator's hop parameters; raise ValueError naming the bad one."""
         try:
@@ -120,6 +130,7 @@ class HopConfig:
             lrf_neighbors=int(lrf_neighbors),
             scale=scale,
             sampling=sampling,
+            attributes=check_attributes(attributes),
         )
 
     @property
@@ -163,7 +174,7 @@ class CloudGeometry:
     Attributes
     ----------
     n_points : int
-    hop1_attributes : ndarray of shape (|S_1|, 24)
+    hop1_attributes : ndarray of shape (|S_1|, config.hop1_dim)
     poolings : list of OctantPooling
         ``poolings[h - 2]`` maps hop ``h - 1`` features (one column per point of
         ``S_{h-1}``) to the octant means entering hop ``h``.
@@ -241,6 +252,7 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
     neighbours = [np.empty(o.shape, np.int32) for o in octants]
     hop1_sums = np.empty((len(queries[0]), 24))
     frames = np.empty((n, 3, 3))
+    eigenvalues = np.empty((n, 3)) if "eigen" in config.attributes else None
     mean_dist = np.empty(n)
     planes = np.ascontiguousarray(points.T)  # (3, n)
     centroid = points.mean(axis=0)[:, None]
@@ -254,7 +266,12 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
         # authors' code does, is cheaper and matched slightly better on resampled
         # ModelNet40 pairs.)
         towards = centroid - planes[:, start:stop]  # each point to the centroid
-        frames[start:stop], local = local_reference_frames(offsets, k_lrf, towards)
+        if eigenvalues is None:
+            frames[start:stop], local = local_reference_frames(offsets, k_lrf, towards)
+        else:
+            frames[start:stop], local, eigenvalues[start:stop] = local_reference_frames(
+                offsets, k_lrf, towards, return_eigenvalues=True
+            )
         mean_dist[start:stop] = np.sqrt(nn_sq[:, 1:k_lrf]).mean(axis=1)
         for h in full:
             k = config.n_neighbors[h]
@@ -280,5 +297,42 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
             octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
             neighbours[h][lo:hi] = nb
     length = cloud_scale(mean_dist, config.scale)
+    hop1 = hop1_sums / length
+    if len(config.attributes) > 1:
+        extra = _neighbour_attributes(config.attributes, queries[0], neighbours[0], octants[0],
+                                      frames, eigenvalues)  # fmt: skip
+        hop1 = np.hstack([hop1, extra])
     poolings = [OctantPooling(octants[h], neighbours[h], len(sources[h])) for h in range(1, n_hops)]
-    return CloudGeometry(n_points=n, hop1_attributes=hop1_sums / length, poolings=poolings)
+    return CloudGeometry(n_points=n, hop1_attributes=hop1, poolings=poolings)
+
+
+def _neighbour_attributes(
+    attributes: tuple[str, ...],
+    queries: np.ndarray,
+    neighbours: np.ndarray,
+    octants: np.ndarray,
+    frames: np.ndarray,
+    eigenvalues: np.ndarray | None,
+) -> np.ndarray:
+    """Octant means of the hop-1 neighbours' normals (in each query's frame) and
+    eigenvalue features, after ``"xyz"``, in the order of ``attributes``.
+
+    A second pass over the hop-1 queries, :data:`GEOMETRY_CHUNK` at a time: every
+    neighbour's own frame and eigenvalues are known only once the first pass is done.
+    """
+    features = eigen_features(eigenvalues) if eigenvalues is not None else None
+    width = sum(ATTRIBUTE_CHANNELS[a] for a in attributes[1:]) * N_OCTANTS
+    out = np.empty((len(queries), width))
+    for lo in range(0, len(queries), GEOMETRY_CHUNK):
+        hi = min(len(queries), lo + GEOMETRY_CHUNK)
+        nb, octant = neighbours[lo:hi], octants[lo:hi]
+        blocks = []
+        for name in attributes[1:]:
+            if name == "normal":
+                # Neighbour j's normal (third axis of its frame) in query i's frame.
+                values = np.einsum("qkd,qdj->jqk", frames[nb, :, 2], frames[queries[lo:hi]])
+            else:
+                values = np.moveaxis(features[nb], 2, 0)  # (7, q, k)
+            blocks.append(octant_means(values, octant))
+        out[lo:hi] = np.hstack(blocks)
+    return out

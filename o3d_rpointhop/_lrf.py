@@ -52,8 +52,8 @@ _SKEW_TOLERANCE = 1e-9
 
 
 def local_reference_frames(
-    offsets: np.ndarray, k: int, towards: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+    offsets: np.ndarray, k: int, towards: np.ndarray, return_eigenvalues: bool = False
+) -> tuple[np.ndarray, ...]:
     """Oriented, right-handed PCA frame of every neighbourhood, and the neighbours in it.
 
     The axes are the eigenvectors of the covariance of the first ``k`` neighbours,
@@ -81,6 +81,8 @@ def local_reference_frames(
     towards : ndarray of shape (3, q)
         Offset from each point to a reference point that moves with the cloud (its
         centroid), used to orient axes along which the neighbours have no skew.
+    return_eigenvalues : bool, default=False
+        Also return the covariance eigenvalues.
 
     Returns
     -------
@@ -90,6 +92,9 @@ def local_reference_frames(
         gets a finite orthonormal frame, though not a unique one.
     local : ndarray of shape (3, q, m)
         All ``m`` neighbours in these frames.
+    eigenvalues : ndarray of shape (q, 3)
+        Only with ``return_eigenvalues``: the covariance's eigenvalues, largest first,
+        clipped at 0 (the variances along the three axes).
     """
     support = offsets[:, :, :k]
     centred = support - support.mean(axis=2, keepdims=True)
@@ -99,7 +104,7 @@ def local_reference_frames(
         for j in range(i, 3):
             cov[:, i, j] = cov[:, j, i] = np.einsum("qk,qk->q", centred[i], centred[j])
     cov /= k
-    _, vecs = np.linalg.eigh(cov)  # ascending eigenvalues
+    vals, vecs = np.linalg.eigh(cov)  # ascending eigenvalues
     axes = np.ascontiguousarray(vecs[:, :, ::-1])
     local = project(offsets, axes)
     support = local[:, :, :k]
@@ -112,4 +117,6 @@ def local_reference_frames(
     det = np.einsum("qi,qi->q", axes[:, :, 0], np.cross(axes[:, :, 1], axes[:, :, 2]))
     sign[1] = sign[0] * sign[2] * np.sign(det)
     local *= sign[:, :, None]
+    if return_eigenvalues:
+        return axes * sign.T[:, None, :], local, np.clip(vals[:, ::-1], 0.0, None)
     return axes * sign.T[:, None, :], local

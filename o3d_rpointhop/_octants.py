@@ -11,7 +11,13 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["N_OCTANTS", "octant_index", "coordinate_octant_means", "OctantPooling"]
+__all__ = [
+    "N_OCTANTS",
+    "octant_index",
+    "octant_means",
+    "coordinate_octant_means",
+    "OctantPooling",
+]
 
 N_OCTANTS = 8
 DTYPE = np.float32  # features from hop 2 on (see RPointHopTransformer.transform)
@@ -55,6 +61,36 @@ def _counts(octant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rows, np.bincount(rows, minlength=N_OCTANTS * q)
 
 
+def octant_means(values: np.ndarray, octant: np.ndarray) -> np.ndarray:
+    """Octant means of per-neighbour values: coordinates, normals, eigen features.
+
+    Parameters
+    ----------
+    values : ndarray of shape (c, q, k)
+        ``c`` channels of every neighbour of every query, as planes.
+    octant : ndarray of shape (q, k)
+        From :func:`octant_index`.
+
+    Returns
+    -------
+    means : ndarray of shape (q, 8 * c)
+        Ordered octant-major: ``means[i, c * o + d]`` is channel ``d`` of the mean over
+        octant ``o``; an empty octant takes the mean of the whole neighbourhood.
+    """
+    c, q, _ = values.shape
+    rows, counts = _counts(octant)
+    out = np.empty((q, N_OCTANTS, c))
+    for d in range(c):
+        sums = np.bincount(rows, weights=values[d].ravel(), minlength=N_OCTANTS * q)
+        means = sums.reshape(N_OCTANTS, q) / np.maximum(counts, 1).reshape(N_OCTANTS, q)
+        empty = counts.reshape(N_OCTANTS, q) == 0
+        if empty.any():
+            whole = values[d].mean(axis=1)  # (q,)
+            means = np.where(empty, whole[None, :], means)
+        out[:, :, d] = means.T
+    return out.reshape(q, N_OCTANTS * c)
+
+
 def coordinate_octant_means(local: np.ndarray, octant: np.ndarray) -> np.ndarray:
     """Hop-1 attributes: octant means of the local coordinates.
 
@@ -70,18 +106,7 @@ def coordinate_octant_means(local: np.ndarray, octant: np.ndarray) -> np.ndarray
         Ordered octant-major: ``attributes[i, 3 * o + d]`` is coordinate ``d`` of the
         mean of octant ``o``.
     """
-    _, q, k = local.shape
-    rows, counts = _counts(octant)
-    out = np.empty((q, N_OCTANTS, 3))
-    for d in range(3):
-        sums = np.bincount(rows, weights=local[d].ravel(), minlength=N_OCTANTS * q)
-        means = sums.reshape(N_OCTANTS, q) / np.maximum(counts, 1).reshape(N_OCTANTS, q)
-        empty = counts.reshape(N_OCTANTS, q) == 0
-        if empty.any():
-            whole = local[d].mean(axis=1)  # (q,)
-            means = np.where(empty, whole[None, :], means)
-        out[:, :, d] = means.T
-    return out.reshape(q, N_OCTANTS * 3)
+    return octant_means(local, octant)
 
 
 class OctantPooling:

@@ -3,11 +3,13 @@
 This module knows the file format, not the estimator: ``rpointhop.py`` imports it and
 hands over the model (or its class); nothing here imports ``rpointhop.py``.
 
-Layout (format version 2; version 1 files, without the PCA entries and the
-``sampling`` and ``n_components`` parameters, still load)::
+Layout (format version 3; version 1 files, without the PCA entries and the
+``sampling`` and ``n_components`` parameters, and version 2 files, without the
+``attributes`` parameter, still load)::
 
     metadata           0-d str array, JSON: format, format_version, library_version,
-                       params, n_hops, n_features_out, n_training_clouds
+                       params, n_hops, n_features_out, n_training_clouds, and
+                       training_scenes (optional: the scene folders a scene model saw)
     hop{h}_kernels     (n_channels, dim, dim) float64
     hop{h}_means       (n_channels, dim) float64
     hop{h}_energies    (n_channels, dim) float64
@@ -31,7 +33,7 @@ import numpy as np
 from ._version import __version__
 
 FORMAT_NAME = "o3d-rpointhop-model"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 # Parameters stored in a model file (n_jobs and progress belong to the machine and the
 # user, not to the model).
@@ -39,6 +41,7 @@ _STORED_PARAMS = (
     "n_neighbors",
     "hop_sizes",
     "lrf_neighbors",
+    "attributes",
     "energy_threshold",
     "scale",
     "fit_subsample",
@@ -69,6 +72,9 @@ def save_model(model: Any, path: str | PathLike) -> None:
         "n_features_out": int(model.selected_[-1].size),
         "n_training_clouds": int(model.n_training_clouds_),
     }
+    scenes = getattr(model, "training_scenes_", None)
+    if scenes is not None:
+        meta["training_scenes"] = [str(name) for name in scenes]
     arrays = {"metadata": np.array(json.dumps(meta))}
     for h in range(len(model.kernels_)):
         arrays[f"hop{h}_kernels"] = np.asarray(model.kernels_[h], dtype=np.float64)
@@ -135,7 +141,7 @@ def _from_arrays(cls: type, path, archive) -> Any:
     unknown = set(params) - set(_STORED_PARAMS)
     if unknown:
         raise _invalid(path, f"unknown parameters {sorted(unknown)}")
-    for name in ("n_neighbors", "hop_sizes"):
+    for name in ("n_neighbors", "hop_sizes", "attributes"):
         if name in params and isinstance(params[name], list):
             params[name] = tuple(params[name])
     model = cls(**params)
@@ -146,7 +152,7 @@ def _from_arrays(cls: type, path, archive) -> Any:
     kernels, means, energies, selected = [], [], [], []
     n_channels = 1
     for h in range(n_hops):
-        dim = 24 if h == 0 else 8
+        dim = config.hop1_dim if h == 0 else 8
         k, b, e, s = (
             _entry(path, archive, f"hop{h}_{name}")
             for name in ("kernels", "means", "energies", "selected")
@@ -191,5 +197,10 @@ def _from_arrays(cls: type, path, archive) -> Any:
         model.pca_mean_ = mean.astype(np.float64)
     model.n_features_in_ = 3
     model.n_training_clouds_ = int(meta.get("n_training_clouds", 0))
+    scenes = meta.get("training_scenes")
+    if scenes is not None:
+        if not (isinstance(scenes, list) and all(isinstance(x, str) for x in scenes)):
+            raise _invalid(path, "training_scenes is not a list of names")
+        model.training_scenes_ = list(scenes)
     model._projection()  # n_components within the stored axes
     return model

@@ -64,7 +64,16 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         scale with the cloud. The last size only sets which points train the last hop:
         when transforming, the last hop is evaluated at every input point.
     lrf_neighbors : int, default=64
-        Number of nearest points (the point itself included) whose PCA gives the LRF.
+        Number of nearest points (the point itself included) whose PCA gives the LRF
+        (the paper's scene variant: 256).
+    attributes : tuple of str, default=("xyz",)
+        What hop 1 pools over the eight LRF octants of each neighbourhood: ``"xyz"``,
+        the neighbours' LRF coordinates (the object variant), and optionally
+        ``"normal"``, their normals expressed in the point's LRF, and ``"eigen"``, seven
+        features of their covariance eigenvalues (linearity, planarity, scattering,
+        omnivariance, anisotropy, eigenentropy, change of curvature): the paper's scene
+        variant. Every attribute is rigid-invariant and finite on planes and edges; see
+        ``o3d_rpointhop._attributes``.
     energy_threshold : float, default=0.001
         Channels whose energy (share of the variance, multiplied down the tree) is below
         this are not passed to the next hop. The last hop keeps all outputs of the
@@ -111,8 +120,9 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         Length of a descriptor: ``n_components`` if set, else every output of the last
         hop.
     kernels_ : list of ndarray of shape (n_channels, dim, dim)
-        Saab kernels of each hop (hop 1: one 24-D channel; later hops: one 8-D channel per
-        channel passed on). Column 0 is the DC kernel.
+        Saab kernels of each hop (hop 1: one channel, 8 octants x the attribute
+        channels: 24-D for ``"xyz"``, 104-D with normals and eigen features; later hops:
+        one 8-D channel per channel passed on). Column 0 is the DC kernel.
     means_ : list of ndarray of shape (n_channels, dim)
         Training mean of every Saab output of each hop, subtracted so that features are
         centred. (The paper instead adds a bias that makes them non-negative; both only
@@ -160,6 +170,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         "n_neighbors": ["array-like"],
         "hop_sizes": ["array-like"],
         "lrf_neighbors": [Interval(Integral, 3, None, closed="left")],
+        "attributes": [tuple, list, str],
         "energy_threshold": [Interval(Real, 0, 1, closed="left")],
         "scale": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "fit_subsample": [None, Interval(Integral, 1, None, closed="left")],
@@ -175,6 +186,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         n_neighbors: Sequence[int] = (64, 32, 48, 48),
         hop_sizes: Sequence[float | int] = (1.0, 0.75, 0.5, 0.375),
         lrf_neighbors: int = 64,
+        attributes: Sequence[str] = ("xyz",),
         energy_threshold: float = 1e-3,
         scale: str | float = "auto",
         fit_subsample: int | None = None,
@@ -187,6 +199,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         self.n_neighbors = n_neighbors
         self.hop_sizes = hop_sizes
         self.lrf_neighbors = lrf_neighbors
+        self.attributes = attributes
         self.energy_threshold = energy_threshold
         self.scale = scale
         self.fit_subsample = fit_subsample
@@ -203,7 +216,12 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         ones that shape the hops."""
         self._validate_params()
         return HopConfig.from_params(
-            self.n_neighbors, self.hop_sizes, self.lrf_neighbors, self.scale, self.sampling
+            self.n_neighbors,
+            self.hop_sizes,
+            self.lrf_neighbors,
+            self.scale,
+            self.sampling,
+            self.attributes,
         )
 
     def _check_sizes(self, clouds: list[np.ndarray], config: HopConfig, kind: str) -> None:
@@ -292,7 +310,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             moments = (
                 MomentAccumulator(1, self.selected_[-1].size)
                 if pca
-                else MomentAccumulator(len(parent_energy), 24 if hop == 0 else 8)
+                else MomentAccumulator(len(parent_energy), config.hop1_dim if hop == 0 else 8)
             )
             for i, geometry in self._geometry_batches(clouds, config, cache):
                 # Room for the structure and, later, the features it produces.

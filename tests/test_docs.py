@@ -83,3 +83,32 @@ def test_console_script_entry_point():
         check=True,
     )
     assert out.stdout.startswith("o3d-rpointhop ")
+
+
+def test_registration_docs_tables_match_the_code():
+    """docs/registration.md's step signatures and settings table are the code's."""
+    import dataclasses
+
+    import o3d_rpointhop
+    from o3d_rpointhop import RegistrationSettings
+
+    text = (ROOT / "docs" / "registration.md").read_text()
+    rows = re.findall(r"^\| `(\w+)\(([^`]*)\)` \|", text, re.M)
+    assert {name for name, _ in rows} >= {
+        "SVDGlobal", "RANSACGlobal", "FGRGlobal", "MultiScaleICP", "SymmetryCheck",
+    }  # fmt: skip
+    for name, args in rows:
+        params = getattr(o3d_rpointhop, name)().get_params()
+        for arg in filter(None, (a.strip() for a in re.split(r",\s*(?![^()]*\))", args))):
+            key, _, default = arg.partition("=")
+            assert key in params, (name, key)
+            if default:
+                assert repr(params[key]).replace("_", "") == default.replace("_", "") or (
+                    eval(default) == params[key]  # noqa: S307 - literals from our own docs
+                ), (name, key, default, params[key])
+    settings = dict(re.findall(r"^\| `(\w+_factors?)` \| ([^|]+) \|", text, re.M))
+    fields = {f.name: f.default for f in dataclasses.fields(RegistrationSettings)}
+    fields.pop("voxel_size")
+    assert set(settings) == set(fields)
+    for key, default in settings.items():
+        assert eval(default.strip()) == fields[key], key  # noqa: S307

@@ -1,0 +1,100 @@
+"""The scene variant's point attributes: normals in the LRF and eigenvalue features."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import random_motion, relative_difference
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from o3d_rpointhop import RPointHopTransformer
+from o3d_rpointhop._attributes import check_attributes, eigen_features
+from o3d_rpointhop.datasets import make_object
+
+SCENE = ("xyz", "normal", "eigen")
+SMALL = dict(n_neighbors=(16, 16), hop_sizes=(1.0, 0.5), lrf_neighbors=32)
+
+
+def _room(n: int = 3000, seed: int = 0) -> np.ndarray:
+    """A corner of a room: floor, two walls and a box on the floor, all planar pieces,
+    sampled exactly on their planes (the worst case for eigen features and normals)."""
+    rng = np.random.default_rng(seed)
+    m = n // 4
+    floor = np.c_[rng.uniform(0, 4, m), rng.uniform(0, 3, m), np.zeros(m)]
+    wall_a = np.c_[np.zeros(m), rng.uniform(0, 3, m), rng.uniform(0, 2.5, m)]
+    wall_b = np.c_[rng.uniform(0, 4, m), np.zeros(m), rng.uniform(0, 2.5, m)]
+    top = np.c_[rng.uniform(1, 2, m), rng.uniform(1, 1.6, m), np.full(m, 0.7)]
+    return np.vstack([floor, wall_a, wall_b, top])
+
+
+@pytest.fixture(scope="module")
+def scene_model():
+    clouds = [make_object(1200, shape_seed=s) for s in range(4)] + [_room(1600, 1)]
+    return RPointHopTransformer(attributes=SCENE, random_state=0, **SMALL).fit(clouds)
+
+
+def test_eigen_features_of_known_shapes():
+    out = eigen_features(np.array([[1.0, 0, 0], [1, 1, 0], [1, 1, 1], [0, 0, 0], [2, 1, 0.5]]))
+    line, plane, ball, point, general = out
+    np.testing.assert_allclose(line, [1, 0, 0, 0, 1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(plane, [0, 1, 0, 0, 1, np.log(2), 0], atol=1e-12)
+    np.testing.assert_allclose(ball, [0, 0, 1, 1 / 3, 0, np.log(3), 1 / 3], atol=1e-12)
+    np.testing.assert_array_equal(point, np.zeros(7))
+    e = np.array([2, 1, 0.5]) / 3.5
+    assert general[3] == pytest.approx(np.cbrt(e.prod()))
+    assert general[5] == pytest.approx(-(e * np.log(e)).sum())
+    # Scale-free: the same shape at any size has the same features.
+    np.testing.assert_allclose(eigen_features(np.array([[2e6, 1e6, 5e5]]))[0], general)
+
+
+def test_attribute_names_are_checked():
+    assert check_attributes("xyz") == ("xyz",)
+    assert check_attributes(["xyz", "eigen"]) == ("xyz", "eigen")
+    for bad in [(), ("normal",), ("xyz", "xyz"), ("xyz", "colour"), 3]:
+        with pytest.raises(ValueError, match="attributes"):
+            RPointHopTransformer(attributes=bad).fit(make_object(300))
+
+
+def test_scene_model_layout(scene_model):
+    assert scene_model.kernels_[0].shape == (1, 104, 104)  # 8 octants x (3 + 3 + 7)
+    xyz = RPointHopTransformer(random_state=0, **SMALL).fit(make_object(1200))
+    assert xyz.kernels_[0].shape == (1, 24, 24)
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 10_000))
+def test_scene_attributes_are_rigid_invariant_and_permutation_equivariant(scene_model, seed):
+    cloud = _room(2000, seed) if seed % 2 else make_object(1500, shape_seed=seed % 40)
+    rot, shift = random_motion(seed, 100.0)
+    perm = np.random.default_rng(seed).permutation(len(cloud))
+    base = scene_model.transform(cloud)
+    assert np.isfinite(base).all()
+    assert relative_difference(scene_model.transform(cloud @ rot.T + shift), base) < 1e-4
+    np.testing.assert_allclose(scene_model.transform(cloud[perm]), base[perm], rtol=0, atol=1e-5)
+
+
+def test_planes_edges_and_duplicates_stay_finite(scene_model):
+    room = _room(2400, 3)
+    wall = room[np.abs(room[:, 0]) < 1e-12]  # one wall alone: every point coplanar
+    doubled = np.vstack([room, room])  # every point twice
+    for cloud in (room, wall, doubled):
+        out = scene_model.transform(cloud)
+        assert out.shape[0] == len(cloud) and np.isfinite(out).all()
+
+
+def test_wide_lrf_and_round_trip(tmp_path):
+    clouds = [_room(3000, s) for s in range(2)]
+    model = RPointHopTransformer(
+        attributes=SCENE, lrf_neighbors=256, n_neighbors=(32, 32), hop_sizes=(1.0, 0.5),
+        random_state=0,
+    ).fit(clouds)  # fmt: skip
+    model.training_scenes_ = ["room-a", "room-b"]
+    model.save(tmp_path / "scene.npz")
+    loaded = RPointHopTransformer.load(tmp_path / "scene.npz")
+    assert loaded.attributes == SCENE and loaded.lrf_neighbors == 256
+    assert loaded.training_scenes_ == ["room-a", "room-b"]
+    cloud = _room(2500, 9)
+    np.testing.assert_array_equal(loaded.transform(cloud), model.transform(cloud))
+    with pytest.raises(ValueError, match="too few"):
+        model.transform(cloud[:200])  # fewer points than the 256-point frames need
