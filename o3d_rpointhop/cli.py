@@ -63,11 +63,12 @@ def _sizes(text: str) -> tuple[float | int, ...]:
 
 
 def _load_model(path: str | None, n_components: int | None = None):
-    """A model file, else the pretrained model (full, or on ``n_components`` axes)."""
-    from .rpointhop import RPointHopTransformer
+    """A model file, a shipped model by name (``modelnet40``, ``scene``), else the
+    pretrained ModelNet40 model (full, or on ``n_components`` axes)."""
+    from .rpointhop import PRETRAINED_MODELS, RPointHopTransformer
 
-    if path is None:
-        return RPointHopTransformer.pretrained(n_components=n_components)
+    if path is None or path in PRETRAINED_MODELS:
+        return RPointHopTransformer.pretrained(path or "modelnet40", n_components=n_components)
     return RPointHopTransformer.load(path)
 
 
@@ -249,7 +250,8 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     else:
         if args.protocol:
             raise CommandError("3dmatch has no protocols to choose")
-        results = run_3dmatch(methods, max_pairs=args.max_pairs, **common)
+        scenes = args.scenes.split(",") if args.scenes else None
+        results = run_3dmatch(methods, max_pairs=args.max_pairs, scenes=scenes, **common)
     paths = write_report(results, args.output)
     print(markdown(results))  # with the timings: the terminal is not a result file
     print("written: " + ", ".join(paths))
@@ -494,7 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output-dir", default="demo_output", help="where results go")
     p.add_argument("--source", help="your own source cloud")
     p.add_argument("--target", help="your own target cloud")
-    p.add_argument("--data", help="data folder (default: $O3D_RPOINTHOP_DATA or ../shared/data)")
+    p.add_argument("--data", help="data folder (default: data_home(), docs/datasets.md)")
     p.add_argument("--synthetic", action="store_true", help="use the synthetic pair")
     p.add_argument("--json", action="store_true", help="print the full result as JSON")
     p.set_defaults(func=cmd_demo)
@@ -547,14 +549,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", choices=["modelnet40", "bunny", "3dmatch", "multiway"])
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
     p.add_argument("--methods", help="comma-separated methods (default: all)")
-    p.add_argument("--data", help="data folder (default: $O3D_RPOINTHOP_DATA or ../shared/data)")
+    p.add_argument("--data", help="data folder (default: data_home(), docs/datasets.md)")
     p.add_argument("--output", default="benchmark_results", help="where results go")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-shapes", type=int, help="ModelNet40: use only the first N test shapes")
     p.add_argument(
         "--max-pairs", type=int, help="3DMatch: a seeded sample of N pairs per benchmark"
     )
-    p.add_argument("--model", help="R-PointHop model file (default: the pretrained model)")
+    p.add_argument(
+        "--scenes", help="3DMatch: comma-separated scene names (or parts of them) to keep"
+    )
+    p.add_argument(
+        "--model",
+        help="R-PointHop model file, or a shipped model: modelnet40, scene (default: "
+        "register()'s default, the ModelNet40 model on 128 axes)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_benchmark)
 

@@ -536,12 +536,16 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
 
         Parameters
         ----------
-        name : {"modelnet40"}
+        name : {"modelnet40", "scene"}
             ``"modelnet40"``: paper object settings, fitted on a ModelNet40 train subset
             (144 shapes, 1024 random points each); see ``docs/model_card.md``.
+            ``"scene"``: the paper's scene attributes (normals and eigenvalue features),
+            fitted on 3DMatch fragments of four scenes, named in its
+            ``training_scenes_``; made by ``scripts/fit_scene_model.py``.
         n_components : int, default=None
-            ``None``: the full descriptor (1624-D). An int up to 128: the descriptor's
-            projection on that many principal axes, fitted on the same training data.
+            ``None``: the full descriptor (1624-D for ``"modelnet40"``). An int up to
+            128: the descriptor's projection on that many principal axes, fitted on the
+            same training data.
 
         Returns
         -------
@@ -550,10 +554,11 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         """
         from importlib.resources import as_file, files
 
-        models = {"modelnet40": "rpointhop_modelnet40.npz"}
-        if name not in models:
-            raise ValueError(f"unknown pretrained model {name!r}; available: {sorted(models)}")
-        with as_file(files("o3d_rpointhop") / "data" / models[name]) as path:
+        if name not in PRETRAINED_MODELS:
+            raise ValueError(
+                f"unknown pretrained model {name!r}; available: {sorted(PRETRAINED_MODELS)}"
+            )
+        with as_file(files("o3d_rpointhop") / "data" / PRETRAINED_MODELS[name]) as path:
             model = cls.load(path)
         model.set_params(n_components=n_components)
         model._projection()  # a clear error for more axes than the file holds
@@ -570,6 +575,10 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             version, or is damaged.
         """
         return load_model(cls, path)
+
+
+#: The models shipped in ``o3d_rpointhop/data``, by name.
+PRETRAINED_MODELS = {"modelnet40": "rpointhop_modelnet40.npz", "scene": "rpointhop_scene.npz"}
 
 
 def default_descriptor() -> RPointHopTransformer:

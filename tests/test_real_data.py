@@ -138,3 +138,23 @@ def test_symmetry_check_puts_right_the_turned_over_shapes_of_the_noisy_protocol(
         )
         assert rotation_error_deg(checked.transformation, pair.truth) < 1.0
         assert checked.fitness >= plain.fitness
+
+
+def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
+    from o3d_rpointhop.benchmark.report import write_report
+    from o3d_rpointhop.benchmark.threedmatch import run_3dmatch
+
+    results = run_3dmatch(["icp"], data=shared_data, max_pairs=2, scenes=["hotel3"],
+                          progress=False)  # fmt: skip
+    for bench in ("3DMatch", "3DLoMatch"):
+        protocol = results["protocols"][bench]
+        assert set(protocol["per_scene"]["icp"]) == {"sun3d-hotel_umd-maryland_hotel3"}
+        assert protocol["per_scene"]["icp"]["sun3d-hotel_umd-maryland_hotel3"]["pairs"] == 2
+        recall = np.mean([r["registered"] for r in protocol["records"]["icp"]])
+        assert protocol["summary"]["icp"]["registration_recall"] == recall
+    paths = write_report(results, tmp_path)
+    assert (tmp_path / "3dmatch_recall_vs_overlap.png").is_file()
+    assert "| sun3d-hotel_umd-maryland_hotel3 | 2 |" in (tmp_path / "3dmatch.md").read_text()
+    assert str(tmp_path / "3dmatch_recall_vs_overlap.png") in paths
+    with pytest.raises(ValueError, match="no 3DMatch pairs"):
+        run_3dmatch(["icp"], data=shared_data, scenes=["nowhere"], progress=False)

@@ -42,6 +42,10 @@ METHODS = {
         Method("rpointhop-ransac", "R-PointHop + RANSAC"),
         Method("rpointhop-ransac-icp", "R-PointHop + RANSAC + point-to-plane ICP"),
         Method(
+            "rpointhop-ransac-icp-4096",
+            "R-PointHop + RANSAC + point-to-plane ICP, 4096 global points",
+        ),
+        Method(
             "rpointhop-ransac-icp-sym",
             "R-PointHop + RANSAC + point-to-plane ICP + symmetry check",
         ),
@@ -182,6 +186,9 @@ def run_method(
         ),
         "rpointhop-ransac-icp": lambda: (
             register(source, target, descriptor, seed=seed).transformation
+        ),
+        "rpointhop-ransac-icp-4096": lambda: (
+            register(source, target, descriptor, n_global_points=4096, seed=seed).transformation
         ),
         "rpointhop-ransac-icp-sym": lambda: (
             register(

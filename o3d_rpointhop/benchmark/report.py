@@ -68,6 +68,21 @@ def _table(summary: dict) -> list[str]:
     return lines
 
 
+def _scene_table(per_scene: dict, settings: dict) -> list[str]:
+    """Registration recall per scene; scenes the R-PointHop model was fitted on marked."""
+    seen = set(settings.get("model_training_scenes") or [])
+    methods = list(per_scene)
+    scenes = list(next(iter(per_scene.values())))
+    lines = ["| scene | pairs | " + " | ".join(METHODS[m].description for m in methods) + " |"]
+    lines.append("|---" * (len(methods) + 2) + "|")
+    for scene in scenes:
+        name = f"{scene} (model fitted on it)" if scene in seen else scene
+        cells = [f"{per_scene[m][scene]['registration_recall']:.0%}" for m in methods]
+        count = per_scene[methods[0]][scene]["pairs"]
+        lines.append(f"| {name} | {count} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def markdown(results: dict) -> str:
     """Markdown tables of a benchmark result."""
     lines = [f"# Benchmark: {results['dataset']}", ""]
@@ -104,6 +119,8 @@ def markdown(results: dict) -> str:
                 lines.append(f"| {angle} | " + " | ".join(cells) + " |")
             continue
         lines += _table(protocol["summary"])
+        if "per_scene" in protocol:
+            lines += ["", *_scene_table(protocol["per_scene"], settings)]
         if "feature_match_recall" in protocol:
             fmr = ", ".join(f"{k} {v:.1%}" for k, v in protocol["feature_match_recall"].items())
             lines += ["", f"Feature-match recall (tau1 0.1 m, tau2 0.05): {fmr}."]
@@ -135,6 +152,8 @@ def _plots(results: dict, folder: Path, stem: str) -> list[str]:
         path = folder / f"{stem}_{metric}.png"
         fig.savefig(path, dpi=110)
         written.append(str(path))
+    if results["dataset"] == "3dmatch":
+        written += _overlap_plot(results, figure_class, folder, stem)
     for name, protocol in results["protocols"].items():
         if "angles" not in protocol:
             continue
@@ -181,6 +200,40 @@ def timings_markdown(results: dict) -> str:
         if "fit_seconds" in protocol:
             lines.append(f"| {name} | model fit | {protocol['fit_seconds']:.1f} (total) |")
     return "\n".join(lines) + "\n"
+
+
+#: Overlap bins of the recall-against-overlap plot (3DLoMatch is below 0.3).
+OVERLAP_BINS = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
+
+
+def _overlap_plot(results: dict, figure_class, folder: Path, stem: str) -> list[str]:
+    """Registration recall against the pairs' overlap, both benchmarks pooled."""
+    records: dict[str, list] = {}
+    for protocol in results["protocols"].values():
+        for method, recs in protocol.get("records", {}).items():
+            records.setdefault(method, []).extend(recs)
+    if not records:
+        return []
+    fig = figure_class(figsize=(7, 4))
+    ax = fig.subplots()
+    edges = np.array(OVERLAP_BINS)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    for method, recs in records.items():
+        overlap = np.array([r["overlap"] if r["overlap"] is not None else np.nan for r in recs])
+        hit = np.array([r["registered"] for r in recs], dtype=float)
+        which = np.digitize(overlap, edges) - 1
+        recall = [hit[which == b].mean() if np.any(which == b) else np.nan
+                  for b in range(len(centres))]  # fmt: skip
+        ax.plot(centres, recall, marker="o", label=METHODS[method].description)
+    ax.set_xlabel("overlap (gt_overlap.log)")
+    ax.set_ylabel("registration recall")
+    ax.set_ylim(0, 1.05)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title("3DMatch + 3DLoMatch: recall against overlap")
+    fig.tight_layout()
+    path = folder / f"{stem}_recall_vs_overlap.png"
+    fig.savefig(path, dpi=110)
+    return [str(path)]
 
 
 def write_report(results: dict, output_dir, stem: str | None = None) -> list[str]:
