@@ -188,7 +188,7 @@ class RegistrationPipeline(_BaseComposition):
     """
 
     _parameter_constraints = {
-        "steps": [list],
+        "steps": [list, tuple],
         "descriptor": [None, HasMethods(["transform"])],
         "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "n_global_points": [Interval(Integral, 3, None, closed="left")],
