@@ -24,12 +24,7 @@ from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.benchmark.methods import run_method
 from o3d_rpointhop.benchmark.metrics import match_inlier_ratio, rmse_3dmatch
 from o3d_rpointhop.datasets import load_3dmatch_pairs
-from o3d_rpointhop.registration.context import RegistrationContext
-
-
-def downsampled(points: np.ndarray) -> np.ndarray:
-    """The fragment as register()'s global step sees it."""
-    return np.asarray(RegistrationContext(points, points).global_cloud("source").points)
+from o3d_rpointhop.registration.context import RegistrationContext, global_points
 
 
 def held_out_models(pairs) -> tuple[dict, dict]:
@@ -39,7 +34,7 @@ def held_out_models(pairs) -> tuple[dict, dict]:
         fragments[(pair.scene, pair.j)] = pair.source
     models, facts = {}, {}
     for scene in sorted({p.scene for p in pairs}):
-        train = [downsampled(x) for (s, _), x in sorted(fragments.items()) if s != scene]
+        train = [global_points(x) for (s, _), x in sorted(fragments.items()) if s != scene]
         start = time.perf_counter()
         models[scene] = RPointHopTransformer(random_state=0).fit(train)
         facts[scene] = {

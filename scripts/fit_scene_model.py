@@ -27,7 +27,7 @@ import numpy as np
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import data_home
 from o3d_rpointhop.io import read_cloud
-from o3d_rpointhop.registration.context import RegistrationContext
+from o3d_rpointhop.registration.context import global_points
 
 #: The scenes the shipped scene model is fitted on (and every scene setting tuned on).
 TRAINING_SCENES = (
@@ -48,12 +48,6 @@ DEFAULT_OUTPUT = (
 )
 
 
-def global_cloud(points: np.ndarray, n_global_points: int) -> np.ndarray:
-    """A fragment as ``register()``'s global step sees it (voxel-downsampled)."""
-    context = RegistrationContext(points, points, n_global_points=n_global_points)
-    return np.asarray(context.global_cloud("source").points) + context.origin
-
-
 def training_clouds(root: Path, n_global_points: int) -> list[np.ndarray]:
     clouds = []
     for scene in TRAINING_SCENES:
@@ -61,7 +55,7 @@ def training_clouds(root: Path, n_global_points: int) -> list[np.ndarray]:
         paths = sorted(folder.glob("cloud_bin_*.ply"), key=lambda p: int(p.stem.split("_")[-1]))
         if not paths:
             raise FileNotFoundError(f"no fragments in {folder}")
-        clouds += [global_cloud(np.asarray(read_cloud(p).points), n_global_points) for p in paths]
+        clouds += [global_points(read_cloud(p), n_global_points) for p in paths]
     return clouds
 
 

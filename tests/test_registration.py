@@ -427,3 +427,17 @@ def test_import_works_under_python_OO():
         text=True,
     )
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
+
+
+def test_global_points_are_what_register_describes():
+    from o3d_rpointhop.registration.context import global_points
+
+    small = make_object(1500, shape_seed=3) + 1000.0
+    np.testing.assert_allclose(global_points(small), small, atol=1e-9)  # used as it is
+    big = make_object(20000, shape_seed=3) + 1000.0
+    down = global_points(big)
+    assert 1500 < len(down) <= 1.15 * 2048  # about n_global_points
+    # In the cloud's own coordinates: every kept point is a voxel mean, next to the cloud.
+    from scipy.spatial import cKDTree
+
+    assert cKDTree(big).query(down)[0].max() < 0.1

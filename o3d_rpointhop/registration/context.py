@@ -17,7 +17,7 @@ import open3d as o3d
 from ..open3d_interop import to_point_cloud
 from .settings import RegistrationSettings, resolve_voxel_size
 
-__all__ = ["RegistrationContext", "RegistrationWarning", "check_geometry"]
+__all__ = ["RegistrationContext", "RegistrationWarning", "check_geometry", "global_points"]
 
 # A cloud whose second principal extent is below this share of its first is a line, and
 # whose third is below it, a plane (relative standard deviations).
@@ -231,3 +231,11 @@ class RegistrationContext:
             copy.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
             self._normals[key] = copy
         return self._normals[key]
+
+
+def global_points(points: Any, n_global_points: int = 2048) -> np.ndarray:
+    """A cloud as ``register()``'s global step sees it when registered to itself:
+    voxel-downsampled to about ``n_global_points`` points (as it is, if smaller), in the
+    cloud's own coordinates. What a model for ``register()`` should be fitted on."""
+    context = RegistrationContext(points, points, n_global_points=n_global_points)
+    return np.asarray(context.global_cloud("source").points) + context.origin
