@@ -511,7 +511,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--descriptor", choices=["rpointhop", "fpfh"], default="rpointhop")
-    p.add_argument("--model", help="R-PointHop model file (default: the pretrained model)")
+    p.add_argument(
+        "--model",
+        help="R-PointHop model file, or a shipped model: modelnet40, scene (default: the "
+        "ModelNet40 model on 128 axes)",
+    )
     p.add_argument(
         "--global", dest="global_method", choices=["ransac", "fgr", "svd", "none"],
         default="ransac", help="global estimate (default: ransac)",
@@ -610,7 +614,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"write outputs over {MAX_OUTPUT_BYTES // 1024**2} MB (a 1624-D descriptor is "
         "6.5 kB a point)",
     )
-    p.add_argument("--model", help="model file written by 'fit' (default: the pretrained model)")
+    p.add_argument(
+        "--model",
+        help="model file written by 'fit', or a shipped model: modelnet40, scene (default: "
+        "modelnet40)",
+    )
     p.add_argument(
         "--n-components",
         type=int,

@@ -224,3 +224,17 @@ def test_demo_prints_a_human_summary_and_says_when_it_falls_back(tmp_path, capsy
     assert text.startswith("No real data found, so the demo uses a synthetic object")
     assert "rotation error" in text and "fitness" in text and "before_after.png" in text
     assert "{" not in text  # not JSON
+
+
+def test_shipped_models_by_name(tmp_path):
+    query = _write(tmp_path / "q.ply", make_object(600, shape_seed=9))
+    out = tmp_path / "scene.npy"
+    assert (
+        main(["describe", query, "--model", "scene", "--n-components", "16", "-o", str(out)]) == 0
+    )
+    expected = RPointHopTransformer.pretrained("scene", n_components=16).transform(
+        read_cloud(query)
+    )
+    np.testing.assert_array_equal(np.load(out), expected)
+    assert main(["describe", query, "--model", "modelnet40", "-o", str(out)]) == 0
+    assert np.load(out).shape == (600, 1624)
