@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import NOT_APPLICABLE
+from conftest import NOT_APPLICABLE, assert_passes_check_estimator
 from sklearn.base import clone
-from sklearn.utils.estimator_checks import check_estimator
 
 from o3d_rpointhop import FPFHTransformer
 from o3d_rpointhop.datasets import make_object
@@ -89,18 +88,8 @@ FPFH_NOT_APPLICABLE = {
 
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")
 def test_sklearn_check_estimator():
-    results = check_estimator(
-        FPFHTransformer(radius=0.5, normal_radius=0.5, max_nn=10, normal_max_nn=10),
-        expected_failed_checks=FPFH_NOT_APPLICABLE,
-        on_fail=None,
-    )
-    failed = [
-        (r["check_name"], str(r["exception"])[:200]) for r in results if r["status"] == "failed"
-    ]
-    assert failed == []
-    xfailed = {r["check_name"] for r in results if r["status"] == "xfail"}
-    assert xfailed == set(FPFH_NOT_APPLICABLE)
-    assert sum(r["status"] == "passed" for r in results) >= 30
+    estimator = FPFHTransformer(radius=0.5, normal_radius=0.5, max_nn=10, normal_max_nn=10)
+    assert_passes_check_estimator(estimator, FPFH_NOT_APPLICABLE)
 
 
 def test_parameters_are_validated_declaratively():
