@@ -64,12 +64,15 @@ def _sizes(text: str) -> tuple[float | int, ...]:
 
 def _load_model(path: str | None, n_components: int | None = None):
     """A model file, a shipped model by name (``modelnet40``, ``scene``), else the
-    pretrained ModelNet40 model (full, or on ``n_components`` axes)."""
+    pretrained ModelNet40 model; on ``n_components`` axes when given."""
     from .rpointhop import PRETRAINED_MODELS, RPointHopTransformer
 
     if path is None or path in PRETRAINED_MODELS:
         return RPointHopTransformer.pretrained(path or "modelnet40", n_components=n_components)
-    return RPointHopTransformer.load(path)
+    model = RPointHopTransformer.load(path)
+    if n_components is not None:
+        model.set_params(n_components=n_components)
+    return model
 
 
 # --------------------------------------------------------------------------- commands
@@ -108,8 +111,6 @@ def cmd_describe(args: argparse.Namespace) -> int:
     check_output_path(args.output)
     cloud = read_cloud(args.cloud)
     model = _load_model(args.model, args.n_components)
-    if args.model and args.n_components is not None:
-        model.set_params(n_components=args.n_components)
     # 4 bytes a value, plus the header: refuse before spending the time.
     _check_size(args.output, 4 * len(cloud.points) * model.n_features_out_, args.force)
     start = time.perf_counter()
@@ -324,7 +325,7 @@ def _benchmark_multiway(args: argparse.Namespace) -> int:
         run_multiway,
         timings_markdown,
     )
-    from .benchmark.report import split_timings
+    from .benchmark.report import write_split
 
     objects = args.protocol or list(OBJECTS)
     unknown = [o for o in objects if o not in OBJECTS]
@@ -340,17 +341,9 @@ def _benchmark_multiway(args: argparse.Namespace) -> int:
             plot_reconstruction(entry, method, path, f"{name}: {method}, scans by colour")
             written.append(str(path))
         del entry["moved"]
-    kept, timed = split_timings(results)
-    files = {
-        "multiway.json": json.dumps(kept, indent=1) + "\n",
-        "multiway.md": markdown(kept),
-        "multiway_timings.json": json.dumps(timed, indent=1) + "\n",
-        "multiway_timings.md": timings_markdown(results),
-    }
-    for name, text in files.items():
-        (folder / name).write_text(text)
+    files = write_split(results, folder, "multiway", markdown, timings_markdown)
     print(markdown(results))
-    print("written: " + ", ".join([*(str(folder / n) for n in files), *written]))
+    print("written: " + ", ".join([*files, *written]))
     return EXIT_OK
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from .methods import METHODS
 
-__all__ = ["TIMING_KEYS", "split_timings", "markdown", "write_report"]
+__all__ = ["TIMING_KEYS", "split_timings", "markdown", "write_split", "write_report"]
 
 #: Keys whose values are wall times or depend on the machine, wherever they occur.
 TIMING_KEYS = frozenset({"seconds", "seconds_per_pair", "fit_seconds", "machine"})
@@ -236,22 +236,27 @@ def _overlap_plot(results: dict, figure_class, folder: Path, stem: str) -> list[
     return [str(path)]
 
 
-def write_report(results: dict, output_dir, stem: str | None = None) -> list[str]:
-    """Write the results apart from their timings, and the plots; return the paths.
+def write_split(results: dict, folder: Path, stem: str, markdown_of, timings_markdown_of):
+    """Write ``<stem>.json`` / ``<stem>.md`` without the timings (unchanged by a rerun)
+    and ``<stem>_timings.json`` / ``<stem>_timings.md`` with them; return the paths.
+    ``markdown_of`` renders the results, ``timings_markdown_of`` their wall times."""
+    kept, timed = split_timings(results)
+    texts = {
+        f"{stem}.json": json.dumps(kept, indent=1, default=float) + "\n",
+        f"{stem}.md": markdown_of(kept),
+        f"{stem}_timings.json": json.dumps(timed, indent=1, default=float) + "\n",
+        f"{stem}_timings.md": timings_markdown_of(results),
+    }
+    for name, text in texts.items():
+        (folder / name).write_text(text)
+    return [str(folder / name) for name in texts]
 
-    ``<stem>.json`` and ``<stem>.md``: what the methods found (unchanged by a rerun);
-    ``<stem>_timings.json`` and ``<stem>_timings.md``: how long they took; PNG plots.
-    """
+
+def write_report(results: dict, output_dir, stem: str | None = None) -> list[str]:
+    """Write the results apart from their timings (:func:`write_split`), and the plots;
+    return the paths."""
     folder = Path(output_dir)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or results["dataset"]
-    kept, timed = split_timings(results)
-    paths = {
-        f"{stem}.json": json.dumps(kept, indent=1, default=float) + "\n",
-        f"{stem}.md": markdown(kept),
-        f"{stem}_timings.json": json.dumps(timed, indent=1, default=float) + "\n",
-        f"{stem}_timings.md": timings_markdown(results),
-    }
-    for name, text in paths.items():
-        (folder / name).write_text(text)
-    return [*(str(folder / n) for n in paths), *_plots(kept, folder, stem)]
+    written = write_split(results, folder, stem, markdown, timings_markdown)
+    return [*written, *_plots(split_timings(results)[0], folder, stem)]
