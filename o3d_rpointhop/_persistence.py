@@ -9,7 +9,8 @@ Layout (format version 3; version 1 files, without the PCA entries and the
 
     metadata           0-d str array, JSON: format, format_version, library_version,
                        params, n_hops, n_features_out, n_training_clouds, and
-                       training_scenes (optional: the scene folders a scene model saw)
+                       training_scenes (optional: the scene folders a scene model saw),
+                       registration_points (optional: register()'s global cloud size)
     hop{h}_kernels     (n_channels, dim, dim) float64
     hop{h}_means       (n_channels, dim) float64
     hop{h}_energies    (n_channels, dim) float64
@@ -75,6 +76,9 @@ def save_model(model: Any, path: str | PathLike) -> None:
     scenes = getattr(model, "training_scenes_", None)
     if scenes is not None:
         meta["training_scenes"] = [str(name) for name in scenes]
+    points = getattr(model, "registration_points_", None)
+    if points is not None:
+        meta["registration_points"] = int(points)
     arrays = {"metadata": np.array(json.dumps(meta))}
     for h in range(len(model.kernels_)):
         arrays[f"hop{h}_kernels"] = np.asarray(model.kernels_[h], dtype=np.float64)
@@ -202,5 +206,10 @@ def _from_arrays(cls: type, path, archive) -> Any:
         if not (isinstance(scenes, list) and all(isinstance(x, str) for x in scenes)):
             raise _invalid(path, "training_scenes is not a list of names")
         model.training_scenes_ = list(scenes)
+    points = meta.get("registration_points")
+    if points is not None:
+        if not (isinstance(points, int) and not isinstance(points, bool) and points >= 3):
+            raise _invalid(path, "registration_points is not a count of at least 3")
+        model.registration_points_ = points
     model._projection()  # n_components within the stored axes
     return model

@@ -64,11 +64,14 @@ def _sizes(text: str) -> tuple[float | int, ...]:
 
 def _load_model(path: str | None, n_components: int | None = None):
     """A model file, a shipped model by name (``modelnet40``, ``scene``), else the
-    pretrained ModelNet40 model; on ``n_components`` axes when given."""
+    pretrained ModelNet40 model; on ``n_components`` axes when given (a shipped model
+    otherwise comes as ``pretrained(name)`` gives it)."""
     from .rpointhop import PRETRAINED_MODELS, RPointHopTransformer
 
     if path is None or path in PRETRAINED_MODELS:
-        return RPointHopTransformer.pretrained(path or "modelnet40", n_components=n_components)
+        return RPointHopTransformer.pretrained(
+            path or "modelnet40", n_components="default" if n_components is None else n_components
+        )
     model = RPointHopTransformer.load(path)
     if n_components is not None:
         model.set_params(n_components=n_components)
@@ -132,6 +135,18 @@ def _voxel(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got {text!r}") from None
     if not value > 0:
         raise argparse.ArgumentTypeError(f"voxel size must be positive, got {text!r}")
+    return value
+
+
+def _global_points(text: str) -> int | str:
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a count, got {text!r}") from None
+    if value < 3:
+        raise argparse.ArgumentTypeError(f"need at least 3 global points, got {text!r}")
     return value
 
 
@@ -232,7 +247,7 @@ def _flag_status(result) -> int:
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
     from .benchmark.bunny import run_bunny
-    from .benchmark.methods import METHODS
+    from .benchmark.methods import DEFAULT_METHODS
     from .benchmark.modelnet40 import MODELNET40_PROTOCOLS, run_modelnet40
     from .benchmark.report import markdown, write_report
     from .benchmark.threedmatch import run_3dmatch
@@ -240,7 +255,8 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
 
     if args.dataset == "multiway":
         return _benchmark_multiway(args)
-    methods = args.methods.split(",") if args.methods else list(METHODS)
+    default = DEFAULT_METHODS["3dmatch" if args.dataset == "3dmatch" else "objects"]
+    methods = args.methods.split(",") if args.methods else list(default)
     model = _load_model(args.model) if args.model else default_descriptor()
     common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
     if args.dataset == "modelnet40":
@@ -526,7 +542,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(objects seen whole; see docs/registration.md)",
     )
     p.add_argument("--voxel-size", type=_voxel, default="auto", help="'auto' or a length")
-    p.add_argument("--n-global-points", type=int, default=2048)
+    p.add_argument(
+        "--n-global-points",
+        type=_global_points,
+        default="auto",
+        help="points per cloud for the global step: a count, or 'auto' (what the model "
+        "states: 4096 for --model scene; else 2048)",
+    )
     p.add_argument("--init", help="text file with a 4x4 start transformation (for ICP alone)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-o", "--output", help="write the aligned source cloud here")
@@ -545,7 +567,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("dataset", choices=["modelnet40", "bunny", "3dmatch", "multiway"])
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
-    p.add_argument("--methods", help="comma-separated methods (default: all)")
+    p.add_argument(
+        "--methods",
+        help="comma-separated methods (default: 3dmatch: scene, leave-one-scene-out and "
+        "ModelNet40 models, FPFH recipes and pipeline; objects: every method that needs "
+        "no scene)",
+    )
     p.add_argument("--data", help="data folder (default: data_home(), docs/datasets.md)")
     p.add_argument("--output", default="benchmark_results", help="where results go")
     p.add_argument("--seed", type=int, default=0)

@@ -142,6 +142,14 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
         Variance of the training descriptors along each axis.
     pca_mean_ : ndarray of shape (n_full_features,) or None
         Mean of the training descriptors, subtracted before projecting.
+    training_scenes_ : list of str
+        Only on scene models: the scene folders the model was fitted on (set by
+        ``scripts/fit_scene_model.py``, stored in the model file).
+    registration_points_ : int
+        Only on models that state it: the size each cloud should be downsampled to
+        when :func:`~o3d_rpointhop.register` describes it (its ``n_global_points="auto"``
+        reads it; the shipped scene model: 4096, chosen on its training scenes). Stored
+        in the model file.
 
     See Also
     --------
@@ -530,7 +538,7 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
 
     @classmethod
     def pretrained(
-        cls, name: str = "modelnet40", *, n_components: int | None = None
+        cls, name: str = "modelnet40", *, n_components: int | str | None = "default"
     ) -> RPointHopTransformer:
         """The model shipped with the package, ready to transform.
 
@@ -542,10 +550,13 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             ``"scene"``: the paper's scene attributes (normals and eigenvalue features),
             fitted on 3DMatch fragments of four scenes, named in its
             ``training_scenes_``; made by ``scripts/fit_scene_model.py``.
-        n_components : int, default=None
-            ``None``: the full descriptor (1624-D for ``"modelnet40"``). An int up to
-            128: the descriptor's projection on that many principal axes, fitted on the
-            same training data.
+        n_components : int, None or "default", default="default"
+            ``None``: the full descriptor (1624-D for ``"modelnet40"``, 880-D for
+            ``"scene"``). An int up to 128: the descriptor's projection on that many
+            principal axes, fitted on the same training data. ``"default"``: the model's
+            own choice (:data:`PRETRAINED_COMPONENTS`): the full paper descriptor for
+            ``"modelnet40"``, the 128 axes every scene result was measured with for
+            ``"scene"``.
 
         Returns
         -------
@@ -558,6 +569,8 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
             raise ValueError(
                 f"unknown pretrained model {name!r}; available: {sorted(PRETRAINED_MODELS)}"
             )
+        if n_components == "default":
+            n_components = PRETRAINED_COMPONENTS[name]
         with as_file(files("o3d_rpointhop") / "data" / PRETRAINED_MODELS[name]) as path:
             model = cls.load(path)
         model.set_params(n_components=n_components)
@@ -579,6 +592,10 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
 
 #: The models shipped in ``o3d_rpointhop/data``, by name.
 PRETRAINED_MODELS = {"modelnet40": "rpointhop_modelnet40.npz", "scene": "rpointhop_scene.npz"}
+#: What :meth:`RPointHopTransformer.pretrained` returns by default, by name: the
+#: ModelNet40 model's full descriptor (the paper's), and the scene model on the 128
+#: principal axes it was chosen and measured with (docs/model_card.md).
+PRETRAINED_COMPONENTS = {"modelnet40": None, "scene": 128}
 
 
 def default_descriptor() -> RPointHopTransformer:

@@ -22,61 +22,36 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
-
-from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop.datasets import data_home
-from o3d_rpointhop.io import read_cloud
-from o3d_rpointhop.registration.context import global_points
-
-#: The scenes the shipped scene model is fitted on (and every scene setting tuned on).
-TRAINING_SCENES = (
-    "7-scenes-redkitchen",
-    "sun3d-hotel_umd-maryland_hotel1",
-    "sun3d-hotel_umd-maryland_hotel3",
-    "sun3d-mit_lab_hj-lab_hj_tea_nov_2_2012_scan1_erika",
+from o3d_rpointhop.benchmark.scene_models import (
+    FIT_POINTS,
+    SCENE_PARAMS,
+    TRAINING_SCENES,
+    fit_scene_model,
 )
-#: The scene model's settings: the paper's object hops with its scene attributes.
-SCENE_PARAMS = dict(
-    attributes=("xyz", "normal", "eigen"),
-    lrf_neighbors=64,
-    n_components=128,
-    random_state=0,
-)
+
 DEFAULT_OUTPUT = (
     Path(__file__).resolve().parents[1] / "o3d_rpointhop" / "data" / "rpointhop_scene.npz"
 )
-
-
-def training_clouds(root: Path, n_global_points: int) -> list[np.ndarray]:
-    clouds = []
-    for scene in TRAINING_SCENES:
-        folder = root / "fragments" / scene
-        paths = sorted(folder.glob("cloud_bin_*.ply"), key=lambda p: int(p.stem.split("_")[-1]))
-        if not paths:
-            raise FileNotFoundError(f"no fragments in {folder}")
-        clouds += [global_points(read_cloud(p), n_global_points) for p in paths]
-    return clouds
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None, help="data folder (data_home())")
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
-    parser.add_argument("--n-global-points", type=int, default=2048)
+    parser.add_argument("--n-global-points", type=int, default=FIT_POINTS)
     parser.add_argument("--lrf-neighbors", type=int, default=SCENE_PARAMS["lrf_neighbors"])
     args = parser.parse_args(argv)
-    root = (args.data or data_home()) / "3dmatch"
-    clouds = training_clouds(root, args.n_global_points)
     start = time.perf_counter()
-    params = {**SCENE_PARAMS, "lrf_neighbors": args.lrf_neighbors}
-    model = RPointHopTransformer(**params).fit(clouds)
-    model.training_scenes_ = list(TRAINING_SCENES)
+    model = fit_scene_model(
+        TRAINING_SCENES,
+        args.data,
+        n_points=args.n_global_points,
+        lrf_neighbors=args.lrf_neighbors,
+    )
     args.output.parent.mkdir(parents=True, exist_ok=True)
     model.save(args.output)
     print(
-        f"fitted on {len(clouds)} fragments of {len(TRAINING_SCENES)} scenes "
-        f"({np.mean([len(c) for c in clouds]):.0f} points each) in "
+        f"fitted on {model.n_training_clouds_} fragments of {len(TRAINING_SCENES)} scenes in "
         f"{time.perf_counter() - start:.0f} s: {model.n_features_out_}-D descriptors, "
         f"{args.output.stat().st_size:,} bytes -> {args.output}"
     )

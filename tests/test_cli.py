@@ -172,6 +172,7 @@ def test_register_options(tmp_path, capsys):
         ["--global", "svd", "--refine", "none"],
         ["--global", "fgr", "--refine", "multiscale", "--voxel-size", "0.04"],
         ["--refine", "point_to_point", "--symmetry-check"],
+        ["--n-global-points", "500"],
     ):
         assert main(["register", src, tgt, "--json", *extra]) == 0, extra
         result = json.loads(capsys.readouterr().out)
@@ -210,6 +211,8 @@ def test_register_usage_errors():
         ["register", "a.ply"],
         ["register", "a", "b", "--voxel-size", "-1"],
         ["register", "a", "b", "--global", "teaser"],
+        ["register", "a", "b", "--n-global-points", "2"],
+        ["register", "a", "b", "--n-global-points", "many"],
     ):
         with pytest.raises(SystemExit) as exc:
             main(args)

@@ -81,11 +81,17 @@ def model_facts(model: RPointHopTransformer) -> dict:
     }
 
 
-def check_methods(methods: Iterable[str]) -> list[str]:
+def check_methods(methods: Iterable[str], scenes: bool = False) -> list[str]:
+    """``methods`` as a list, refused if one is unknown or (without ``scenes``) needs
+    the 3DMatch scenes."""
     methods = list(methods)
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise ValueError(f"unknown methods {unknown}; choose from {sorted(METHODS)}")
+    if not scenes:
+        scene_only = [m for m in methods if METHODS[m].scenes_only]
+        if scene_only:
+            raise ValueError(f"{scene_only} need the 3DMatch scenes (benchmark 3dmatch)")
     return methods
 
 

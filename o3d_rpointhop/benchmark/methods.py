@@ -23,7 +23,7 @@ from ..open3d_interop import to_point_cloud
 from ..registration import RegistrationWarning, register
 from ..registration.steps import repeatable_open3d
 
-__all__ = ["METHODS", "Method", "run_method"]
+__all__ = ["DEFAULT_METHODS", "METHODS", "Method", "run_method"]
 
 reg = o3d.pipelines.registration
 
@@ -32,6 +32,8 @@ reg = o3d.pipelines.registration
 class Method:
     name: str
     description: str
+    #: Only on 3DMatch: the method needs the pair's scene (leave-one-scene-out models).
+    scenes_only: bool = False
 
 
 METHODS = {
@@ -46,12 +48,25 @@ METHODS = {
             "R-PointHop + RANSAC + point-to-plane ICP, 4096 global points",
         ),
         Method(
+            "rpointhop-scene",
+            "R-PointHop, shipped scene model + RANSAC + point-to-plane ICP (register() defaults)",
+        ),
+        Method(
+            "rpointhop-loso",
+            "R-PointHop, scene model fitted on the other scenes + RANSAC + point-to-plane ICP",
+            scenes_only=True,
+        ),
+        Method(
             "rpointhop-ransac-icp-sym",
             "R-PointHop + RANSAC + point-to-plane ICP + symmetry check",
         ),
         Method("fpfh-ransac", "FPFH + RANSAC (Open3D's recipe)"),
         Method("fpfh-fgr", "FPFH + FGR (Open3D's recipe)"),
         Method("fpfh-ransac-icp", "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe)"),
+        Method(
+            "fpfh-ransac-icp-5cm",
+            "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe), 5 cm voxel",
+        ),
         Method("fpfh-pipeline-ransac-icp", "FPFH through this library's RANSAC + ICP"),
         Method(
             "rpointhop-open3d-ransac-icp",
@@ -62,12 +77,31 @@ METHODS = {
 }
 
 
+#: What ``o3d-rpointhop benchmark <dataset>`` runs when not given ``--methods``.
+DEFAULT_METHODS = {
+    "3dmatch": [
+        "rpointhop-scene",
+        "rpointhop-loso",
+        "rpointhop-ransac-icp-4096",
+        "fpfh-ransac-icp",
+        "fpfh-ransac-icp-5cm",
+        "fpfh-pipeline-ransac-icp",
+    ],
+    # The objects: every method that needs no scene, as before scene models existed.
+    "objects": [
+        name
+        for name, m in METHODS.items()
+        if not m.scenes_only and name not in ("rpointhop-scene", "fpfh-ransac-icp-5cm")
+    ],
+}
+
 # Methods that are Open3D calls from end to end (the others go through register(), whose
 # steps already run Open3D repeatably).
 _OPEN3D_ONLY = {
     "fpfh-ransac",
     "fpfh-fgr",
     "fpfh-ransac-icp",
+    "fpfh-ransac-icp-5cm",
     "rpointhop-open3d-ransac-icp",
     "icp",
 }
@@ -143,14 +177,23 @@ def _recipe_icp(source, target, voxel, init):
     return np.array(result.transformation)
 
 
-_RECIPE_MODEL = []
+_LOADED: dict = {}
 
 
 def _recipe_model():
     """Loaded once per process (loading is not part of the recipe's time)."""
-    if not _RECIPE_MODEL:
-        _RECIPE_MODEL.append(open3d_recipe_descriptor())
-    return _RECIPE_MODEL[0]
+    if "recipe" not in _LOADED:
+        _LOADED["recipe"] = open3d_recipe_descriptor()
+    return _LOADED["recipe"]
+
+
+def shipped_scene_model():
+    """The shipped scene model, loaded once per process."""
+    from ..rpointhop import RPointHopTransformer
+
+    if "scene" not in _LOADED:
+        _LOADED["scene"] = RPointHopTransformer.pretrained("scene")
+    return _LOADED["scene"]
 
 
 def run_method(
@@ -167,7 +210,9 @@ def run_method(
     Parameters
     ----------
     descriptor : RPointHopTransformer
-        The model the R-PointHop methods use.
+        The model the R-PointHop methods use (``rpointhop-loso``: the pair's
+        leave-one-scene-out model; ``rpointhop-scene`` always uses the shipped scene
+        model).
     voxel : float
         Resolution of the FPFH recipe and of ICP alone (0.05 for unit-sphere objects, as
         in the Open3D tutorial).
@@ -190,6 +235,10 @@ def run_method(
         "rpointhop-ransac-icp-4096": lambda: (
             register(source, target, descriptor, n_global_points=4096, seed=seed).transformation
         ),
+        "rpointhop-scene": lambda: (
+            register(source, target, shipped_scene_model(), seed=seed).transformation
+        ),
+        "rpointhop-loso": lambda: register(source, target, descriptor, seed=seed).transformation,
         "rpointhop-ransac-icp-sym": lambda: (
             register(
                 source, target, descriptor, refine=["point_to_plane", "symmetry_check"], seed=seed
@@ -199,6 +248,9 @@ def run_method(
         "fpfh-fgr": lambda: _fpfh_fgr(source, target, voxel, seed),
         "fpfh-ransac-icp": lambda: _recipe_icp(
             source, target, voxel, _fpfh_ransac(source, target, voxel, seed)
+        ),
+        "fpfh-ransac-icp-5cm": lambda: _recipe_icp(
+            source, target, 0.05, _fpfh_ransac(source, target, 0.05, seed)
         ),
         "fpfh-pipeline-ransac-icp": lambda: (
             register(
@@ -225,8 +277,11 @@ def run_method(
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says it.
     # Its RANSAC is only repeatable on one thread (see repeatable_open3d), as ours runs.
+    # Loading a model file is not part of a method's time.
     if name == "rpointhop-open3d-ransac-icp":
-        _recipe_model()  # loading the model file is not part of the recipe's time
+        _recipe_model()
+    if name == "rpointhop-scene":
+        shipped_scene_model()
     # Flagged results are scored like any other; the flags' warnings would only repeat.
     with (
         warnings.catch_warnings(),

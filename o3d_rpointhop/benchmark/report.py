@@ -63,7 +63,10 @@ def _table(summary: dict) -> list[str]:
     lines = ["| method | " + " | ".join(c[1] for c in keys) + " |"]
     lines.append("|---" * (len(keys) + 1) + "|")
     for method, s in summary.items():
-        cells = [c[2].format(s[c[0]]) if c[0] in s else "" for c in keys]
+        cells = [
+            "-" if s.get(c[0]) is None and c[0] in s else c[2].format(s[c[0]]) if c[0] in s else ""
+            for c in keys
+        ]
         lines.append(f"| {METHODS[method].description} | " + " | ".join(cells) + " |")
     return lines
 
@@ -76,7 +79,7 @@ def _scene_table(per_scene: dict, settings: dict) -> list[str]:
     lines = ["| scene | pairs | " + " | ".join(METHODS[m].description for m in methods) + " |"]
     lines.append("|---" * (len(methods) + 2) + "|")
     for scene in scenes:
-        name = f"{scene} (model fitted on it)" if scene in seen else scene
+        name = f"{scene} (a model of this run fitted on it)" if scene in seen else scene
         cells = [f"{per_scene[m][scene]['registration_recall']:.0%}" for m in methods]
         count = per_scene[methods[0]][scene]["pairs"]
         lines.append(f"| {name} | {count} | " + " | ".join(cells) + " |")
@@ -119,6 +122,15 @@ def markdown(results: dict) -> str:
                 lines.append(f"| {angle} | " + " | ".join(cells) + " |")
             continue
         lines += _table(protocol["summary"])
+        if "summary_unseen_scenes" in protocol:
+            count = next(iter(protocol["summary_unseen_scenes"].values()))["pairs"]
+            lines += [
+                "",
+                f"On the scenes no model of the run was fitted on ({count} pairs; the "
+                "leave-one-scene-out models never see the pair's own scene):",
+                "",
+                *_table(protocol["summary_unseen_scenes"]),
+            ]
         if "per_scene" in protocol:
             lines += ["", *_scene_table(protocol["per_scene"], settings)]
         if "feature_match_recall" in protocol:

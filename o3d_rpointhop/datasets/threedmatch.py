@@ -10,7 +10,7 @@ import numpy as np
 
 from ._paths import data_home
 
-__all__ = ["FragmentPair", "load_3dmatch_pairs", "read_gt_log", "read_gt_info"]
+__all__ = ["FragmentPair", "load_3dmatch_pairs", "read_gt_log", "read_gt_info", "threedmatch_root"]
 
 
 @dataclass
@@ -65,6 +65,23 @@ def read_gt_info(path: str | os.PathLike) -> dict[tuple[int, int], np.ndarray]:
     return _read_records(path, 6)
 
 
+def threedmatch_root(data_dir: str | os.PathLike | None = None) -> Path:
+    """The folder holding ``fragments/`` and ``benchmarks/``: ``data_dir`` itself or its
+    ``3dmatch/`` subfolder (``None``: ``data_home()``'s).
+
+    Raises
+    ------
+    FileNotFoundError
+        If neither holds a ``fragments/`` folder.
+    """
+    root = Path(data_dir).expanduser() if data_dir is not None else data_home()
+    if not (root / "fragments").is_dir():
+        root = root / "3dmatch"
+    if not (root / "fragments").is_dir():
+        raise FileNotFoundError(f"no 3DMatch fragments/ folder under {root}")
+    return root
+
+
 def load_3dmatch_pairs(
     data_dir: str | os.PathLike | None = None, benchmark: str | None = None
 ) -> list[FragmentPair]:
@@ -81,11 +98,7 @@ def load_3dmatch_pairs(
     """
     from ..io import read_cloud
 
-    root = Path(data_dir).expanduser() if data_dir is not None else data_home()
-    if not (root / "fragments").is_dir():
-        root = root / "3dmatch"
-    if not (root / "fragments").is_dir():
-        raise FileNotFoundError(f"no 3DMatch fragments/ folder under {root}")
+    root = threedmatch_root(data_dir)
     clouds: dict[tuple[str, int], np.ndarray] = {}
     pairs = []
     for bench in ("3DMatch", "3DLoMatch"):

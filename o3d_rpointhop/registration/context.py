@@ -15,7 +15,7 @@ import numpy as np
 import open3d as o3d
 
 from ..open3d_interop import to_point_cloud
-from .settings import RegistrationSettings, resolve_voxel_size
+from .settings import RegistrationSettings, resolve_global_points, resolve_voxel_size
 
 __all__ = ["RegistrationContext", "RegistrationWarning", "check_geometry", "global_points"]
 
@@ -98,8 +98,9 @@ class RegistrationContext:
         Copied: the caller's objects are never modified.
     voxel_size : float or "auto"
         See :func:`~o3d_rpointhop.registration.settings.resolve_voxel_size`.
-    n_global_points : int
-        Size the global step aims for when it downsamples.
+    n_global_points : int or "auto"
+        Size the global step aims for when it downsamples; see
+        :func:`~o3d_rpointhop.registration.settings.resolve_global_points`.
     seed : int
         Seeds every random choice (Open3D's RANSAC and FGR).
     descriptor : transformer or None
@@ -113,6 +114,8 @@ class RegistrationContext:
         Bound to this registration's resolution: every distance a step is not given.
     voxel_size : float
         The resolution (``settings.voxel_size``).
+    n_global_points : int
+        The size the global step aims for, resolved.
     downsampled : bool
         Whether the global step works on voxel-downsampled clouds.
     origin : ndarray of shape (3,)
@@ -125,7 +128,7 @@ class RegistrationContext:
         source: Any,
         target: Any,
         voxel_size: float | str = "auto",
-        n_global_points: int = 2048,
+        n_global_points: int | str = "auto",
         seed: int = 0,
         descriptor: Any = None,
         check: bool = True,
@@ -139,8 +142,9 @@ class RegistrationContext:
         if check:
             check_geometry(np.asarray(self.source.points), "source", source)
             check_geometry(np.asarray(self.target.points), "target", target)
+        self.n_global_points = resolve_global_points(n_global_points, descriptor)
         voxel, self.downsampled = resolve_voxel_size(
-            self.source, self.target, voxel_size, n_global_points
+            self.source, self.target, voxel_size, self.n_global_points
         )
         if settings is not None and not isinstance(settings, RegistrationSettings):
             raise ValueError(f"settings must be a RegistrationSettings, got {settings!r}")
@@ -191,6 +195,7 @@ class RegistrationContext:
                 self.global_cloud("source"),
                 self.global_cloud("target"),
                 voxel_size=self.voxel_size,
+                n_global_points=self.n_global_points,
                 seed=self.seed,
                 descriptor=self.descriptor,
                 check=False,

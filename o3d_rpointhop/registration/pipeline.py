@@ -166,7 +166,9 @@ class RegistrationPipeline(_BaseComposition):
         points are used as they are, with their point spacing as the resolution; larger
         clouds are voxel-downsampled for the global step to about ``n_global_points``
         points. ICP steps always use the full clouds.
-    n_global_points : int, default=2048
+    n_global_points : int or "auto", default="auto"
+        ``"auto"``: what the descriptor states in its ``registration_points_`` (4096
+        for ``RPointHopTransformer.pretrained("scene")``), else 2048.
     seed : int, default=0
         Seeds the random parts (RANSAC, FGR): results are repeatable.
     settings : RegistrationSettings, default=None
@@ -191,7 +193,7 @@ class RegistrationPipeline(_BaseComposition):
         "steps": [list, tuple],
         "descriptor": [None, HasMethods(["transform"])],
         "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
-        "n_global_points": [Interval(Integral, 3, None, closed="left")],
+        "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
         "seed": [Interval(Integral, 0, None, closed="left")],
         "settings": [None, RegistrationSettings],
     }
@@ -201,7 +203,7 @@ class RegistrationPipeline(_BaseComposition):
         steps: list[tuple[str, RegistrationStep]],
         descriptor: Any = None,
         voxel_size: float | str = "auto",
-        n_global_points: int = 2048,
+        n_global_points: int | str = "auto",
         seed: int = 0,
         settings: RegistrationSettings | None = None,
     ) -> None:
@@ -422,7 +424,7 @@ def register(
     global_method: str | RegistrationStep | None = "ransac",
     refine: str | RegistrationStep | list | None = "point_to_plane",
     voxel_size: float | str = "auto",
-    n_global_points: int = 2048,
+    n_global_points: int | str = "auto",
     init: np.ndarray | None = None,
     seed: int = 0,
     settings: RegistrationSettings | None = None,
@@ -447,7 +449,11 @@ def register(
         registered turned over, at the cost of four more ICP runs on the global clouds.
     voxel_size : float or "auto", default="auto"
         See :class:`RegistrationPipeline`.
-    n_global_points : int, default=2048
+    n_global_points : int or "auto", default="auto"
+        Size of the global step's clouds. ``"auto"``: the descriptor's
+        ``registration_points_`` if it states one (the shipped scene model: 4096, so
+        ``register(source, target, RPointHopTransformer.pretrained("scene"))`` is the
+        3DMatch benchmark's setting), else 2048.
     init : ndarray of shape (4, 4), default=None
         Start for ICP when there is no global step.
     seed : int, default=0
