@@ -18,6 +18,7 @@ from ._hops import SAMPLING_METHODS, CloudGeometry, HopConfig, build_geometry
 from ._persistence import load_model, save_model
 from ._progress import progress_bar
 from ._saab import MomentAccumulator, apply_saab, fit_saab
+from ._threads import one_blas_thread
 from ._validation import as_cloud_list, describe_each
 
 __all__ = ["RPointHopTransformer", "default_descriptor", "REGISTRATION_COMPONENTS"]
@@ -473,7 +474,12 @@ class RPointHopTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, Ba
     def _describe(self, points: np.ndarray, config: HopConfig) -> np.ndarray:
         """One row per point. The last hop is evaluated block by block, each block's
         outputs transposed into their rows while still in cache (one transposed copy of
-        the whole result would cost about a quarter of the transform)."""
+        the whole result would cost about a quarter of the transform). BLAS runs on one
+        thread meanwhile: the blocks' threads are ``n_jobs``, and nothing else."""
+        with one_blas_thread():
+            return self._describe_blocks(points, config)
+
+    def _describe_blocks(self, points: np.ndarray, config: HopConfig) -> np.ndarray:
         projection = self._projection()
         bar = self._bar(len(points), "pt", len(points) >= 100_000, "describe")
         geometry = build_geometry(points, config, for_fit=False)

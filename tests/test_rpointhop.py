@@ -338,3 +338,28 @@ def test_transform_in_a_forked_child_after_the_parent_used_its_threads(fitted, c
     with multiprocessing.get_context("fork").Pool(1) as pool:
         result = pool.apply_async(fitted.transform, (cloud,)).get(timeout=60)
     np.testing.assert_array_equal(result, expected)
+
+
+def test_transform_keeps_blas_to_one_thread(fitted, cloud, monkeypatch):
+    """No hidden pool: BLAS runs on one thread inside the transform, and the caller's
+    setting is back afterwards."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import o3d_rpointhop.rpointhop as module
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    seen = []
+    original = module.apply_saab
+
+    def spy(*args):
+        seen.append(blas_threads())
+        return original(*args)
+
+    monkeypatch.setattr(module, "apply_saab", spy)
+    with threadpool_limits(2, user_api="blas"):
+        before = blas_threads()
+        fitted.transform(cloud)
+        assert blas_threads() == before
+    assert seen and all(s <= {1} for s in seen)
