@@ -124,6 +124,25 @@ def test_nearest_and_mutual_matches():
     assert len(mutual) == 100 and len(find_correspondences(src, tgt)) == 101
 
 
+@pytest.mark.parametrize("n_refs, k", [(300, 1), (300, 2), (300, 3), (4, 2), (2, 2)])
+def test_nearest_descriptors_are_the_exact_neighbours(n_refs, k):
+    from scipy.spatial.distance import cdist
+
+    from o3d_rpointhop.correspondences import nearest_descriptors
+
+    rng = np.random.default_rng(n_refs + k)
+    refs = rng.normal(size=(n_refs, 24)).astype(np.float32)
+    queries = np.r_[rng.normal(size=(150, 24)), refs[:5]].astype(np.float32)
+    indices, distances = nearest_descriptors(queries, refs, k=k)
+    exact = cdist(queries.astype(np.float64), refs.astype(np.float64))
+    expected = np.sort(exact, axis=1)[:, :k]
+    assert indices.shape == (len(queries), min(k, n_refs))
+    np.testing.assert_allclose(distances, expected[:, : indices.shape[1]], atol=1e-5)
+    np.testing.assert_allclose(
+        np.take_along_axis(exact, indices, axis=1), distances, atol=1e-5
+    )  # each index is at its distance
+
+
 def test_ratio_and_top_k_filters_follow_the_paper():
     rng = np.random.default_rng(1)
     src = rng.normal(size=(200, 8))
