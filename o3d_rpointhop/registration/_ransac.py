@@ -96,12 +96,17 @@ def _verify(rot, shift, clouds, threshold: float, tree: cKDTree) -> int:
     """Index of the hypothesis with the best fitness, then inlier RMSE, on whole clouds
     (the first on a tie)."""
     source = clouds[0]
-    fitness, rmse = np.empty(len(rot)), np.empty(len(rot))
-    for k in range(len(rot)):
-        dist, _ = tree.query(source @ rot[k].T + shift[k], distance_upper_bound=threshold)
-        inside = np.isfinite(dist)
-        fitness[k] = inside.mean()
-        rmse[k] = np.sqrt(np.mean(dist[inside] ** 2)) if inside.any() else np.inf
+    # Every hypothesis's moved cloud in one query, on all cores: each point's nearest
+    # neighbour does not depend on how the points are shared out.
+    moved = np.einsum("bij,nj->bni", rot, source) + shift[:, None, :]
+    dist, _ = tree.query(moved.reshape(-1, 3), distance_upper_bound=threshold, workers=-1)
+    dist = dist.reshape(len(rot), len(source))
+    inside = np.isfinite(dist)
+    fitness = inside.mean(axis=1)
+    squares = np.where(inside, dist, 0.0) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rmse = np.sqrt(squares.sum(axis=1) / inside.sum(axis=1))
+    rmse[~inside.any(axis=1)] = np.inf
     return int(np.lexsort((rmse, -fitness))[0])
 
 
