@@ -164,7 +164,7 @@ def run_3dmatch(
             "records": records,
             "inlier_ratios": fmr,
         }
-        if seen and unseen:
+        if unseen and len(unseen) < len(chosen):  # some pairs are in scenes a model saw
             out["protocols"][bench]["summary_unseen_scenes"] = {
                 method: _summary([recs[k] for k in unseen]) for method, recs in records.items()
             }
