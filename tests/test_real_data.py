@@ -144,17 +144,25 @@ def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
     from o3d_rpointhop.benchmark.report import write_report
     from o3d_rpointhop.benchmark.threedmatch import run_3dmatch
 
-    results = run_3dmatch(["icp"], data=shared_data, max_pairs=2, scenes=["hotel3"],
-                          progress=False)  # fmt: skip
+    results = run_3dmatch(["icp", "rpointhop-scene"], data=shared_data, max_pairs=2,
+                          scenes=["hotel3"], progress=False)  # fmt: skip
+    scene = "sun3d-hotel_umd-maryland_hotel3"
+    # The shipped scene model was fitted on hotel3: the run says so.
+    assert scene in results["settings"]["model_training_scenes"]
     for bench in ("3DMatch", "3DLoMatch"):
         protocol = results["protocols"][bench]
-        assert set(protocol["per_scene"]["icp"]) == {"sun3d-hotel_umd-maryland_hotel3"}
-        assert protocol["per_scene"]["icp"]["sun3d-hotel_umd-maryland_hotel3"]["pairs"] == 2
+        assert set(protocol["per_scene"]["icp"]) == {scene}
+        assert protocol["per_scene"]["icp"][scene]["pairs"] == 2
         recall = np.mean([r["registered"] for r in protocol["records"]["icp"]])
         assert protocol["summary"]["icp"]["registration_recall"] == recall
+        assert "summary_unseen_scenes" not in protocol  # every pair is in a seen scene
+        # Feature-match recall of the scene model, on the clouds register() gives it.
+        assert set(protocol["feature_match_recall"]) == {"fpfh", "scene"}
     paths = write_report(results, tmp_path)
     assert (tmp_path / "3dmatch_recall_vs_overlap.png").is_file()
-    assert "| sun3d-hotel_umd-maryland_hotel3 | 2 |" in (tmp_path / "3dmatch.md").read_text()
+    assert f"| {scene} (a model of this run fitted on it) | 2 |" in (
+        tmp_path / "3dmatch.md"
+    ).read_text()
     assert str(tmp_path / "3dmatch_recall_vs_overlap.png") in paths
     with pytest.raises(ValueError, match="no 3DMatch pairs"):
         run_3dmatch(["icp"], data=shared_data, scenes=["nowhere"], progress=False)
