@@ -126,28 +126,25 @@ def cmd_describe(args: argparse.Namespace) -> int:
     return 0
 
 
-def _voxel(text: str) -> float | str:
-    if text == "auto":
-        return text
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"voxel size must be positive, got {text!r}")
-    return value
+def _auto_or(convert, what: str, valid, problem: str):
+    """An argparse type: ``"auto"``, or ``convert(text)`` when ``valid`` accepts it."""
+
+    def parse(text: str):
+        if text == "auto":
+            return text
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected 'auto' or {what}, got {text!r}") from None
+        if not valid(value):
+            raise argparse.ArgumentTypeError(f"{problem}, got {text!r}")
+        return value
+
+    return parse
 
 
-def _global_points(text: str) -> int | str:
-    if text == "auto":
-        return text
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a count, got {text!r}") from None
-    if value < 3:
-        raise argparse.ArgumentTypeError(f"need at least 3 global points, got {text!r}")
-    return value
+_voxel = _auto_or(float, "a number", lambda v: v > 0, "voxel size must be positive")
+_global_points = _auto_or(int, "a count", lambda v: v >= 3, "need at least 3 global points")
 
 
 def _read_matrix(path: str) -> np.ndarray:
