@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable
 
 import numpy as np
@@ -14,6 +15,9 @@ from .metrics import match_inlier_ratio, rmse_3dmatch
 from .scene_models import leave_one_scene_out
 
 __all__ = ["run_3dmatch"]
+
+# Methods whose descriptor is a scene model, not the ``model`` argument.
+_SCENE_METHODS = {"rpointhop-scene", "rpointhop-loso"}
 
 
 def run_3dmatch(
@@ -49,8 +53,6 @@ def run_3dmatch(
     nearest-descriptor matches (on the registration's downsampled clouds) lie within
     0.1 m of each other under the ground truth.
     """
-    import time
-
     from ..datasets.threedmatch import load_3dmatch_pairs
     from ..fpfh import FPFHTransformer
     from ..registration.context import RegistrationContext
@@ -103,24 +105,26 @@ def run_3dmatch(
             return loso[pair.scene]
         return scene_model if method == "rpointhop-scene" else model
 
-    # Feature-match recall of each descriptor a method uses, on the clouds register()
-    # describes with it (its resolution and, for scene models, 4096 points).
+    # Feature-match recall of each descriptor the methods use, on the clouds register()
+    # describes with it (its resolution and, for scene models, 4096 points): by name,
+    # a method that uses it (None: FPFH).
     fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
-    families = {"fpfh": lambda pair: fpfh}
-    if any(m.startswith("rpointhop") and m not in _SCENE_METHODS for m in methods):
-        families["rpointhop"] = lambda pair: model
+    families = {"fpfh": None}
+    plain = [m for m in methods if m.startswith("rpointhop") and m not in _SCENE_METHODS]
+    if plain:
+        families["rpointhop"] = plain[0]
     if scene_model is not None:
-        families["scene"] = lambda pair: scene_model
+        families["scene"] = "rpointhop-scene"
     if loso:
-        families["leave-one-scene-out"] = lambda pair: loso[pair.scene]
+        families["leave-one-scene-out"] = "rpointhop-loso"
     bar = Progress((len(methods) + len(families)) * len(pairs), "3dmatch", progress)
     fmr = {name: [] for name in families}
     voxels = {}  # the resolution register() picks, per pair
     for pair in pairs:
         context = RegistrationContext(pair.source, pair.target)
         voxels[id(pair)] = context.voxel_size
-        for name, descriptor_for in families.items():
-            descriptor = descriptor_for(pair)
+        for name, method in families.items():
+            descriptor = fpfh if method is None else descriptor_of(method, pair)
             own = RegistrationContext(pair.source, pair.target, descriptor=descriptor)
             fmr[name].append({
                 "pair": f"{pair.scene} {pair.i}-{pair.j}",
@@ -169,10 +173,6 @@ def run_3dmatch(
                 method: _summary([recs[k] for k in unseen]) for method, recs in records.items()
             }
     return out
-
-
-# Methods whose descriptor is a scene model, not the ``model`` argument.
-_SCENE_METHODS = {"rpointhop-scene", "rpointhop-loso"}
 
 
 def _summary(recs: list[dict]) -> dict:
