@@ -160,9 +160,10 @@ def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
         assert set(protocol["feature_match_recall"]) == {"fpfh", "scene"}
     paths = write_report(results, tmp_path)
     assert (tmp_path / "3dmatch_recall_vs_overlap.png").is_file()
-    assert f"| {scene} (a model of this run fitted on it) | 2 |" in (
-        tmp_path / "3dmatch.md"
-    ).read_text()
+    assert (
+        f"| {scene} (a model of this run fitted on it) | 2 |"
+        in (tmp_path / "3dmatch.md").read_text()
+    )
     assert str(tmp_path / "3dmatch_recall_vs_overlap.png") in paths
     with pytest.raises(ValueError, match="no 3DMatch pairs"):
         run_3dmatch(["icp"], data=shared_data, scenes=["nowhere"], progress=False)
