@@ -9,20 +9,8 @@ size (``registration_points_``: 4096), so ``register()`` needs no other argument
 import numpy as np
 
 from o3d_rpointhop import RPointHopTransformer, register
+from o3d_rpointhop.datasets import make_room
 from o3d_rpointhop.transforms import random_rigid_motion, rotation_error_deg, translation_error
-
-
-def synthetic_room(n: int, seed: int) -> np.ndarray:
-    """Floor, two walls, a table and a box, sampled uniformly (metres)."""
-    rng = np.random.default_rng(seed)
-    m = n // 5
-    floor = np.c_[rng.uniform(0, 4, m), rng.uniform(0, 3, m), np.zeros(m)]
-    wall_a = np.c_[np.zeros(m), rng.uniform(0, 3, m), rng.uniform(0, 2.5, m)]
-    wall_b = np.c_[rng.uniform(0, 4, m), np.zeros(m), rng.uniform(0, 2.5, m)]
-    table = np.c_[rng.uniform(1, 2.2, m), rng.uniform(1, 1.8, m), np.full(m, 0.75)]
-    box = np.c_[rng.uniform(3, 3.5, m), rng.uniform(0.2, 0.6, m), rng.uniform(0, 0.5, m)]
-    return np.vstack([floor, wall_a, wall_b, table, box])
-
 
 try:
     from o3d_rpointhop.datasets import load_3dmatch_pairs
@@ -32,9 +20,9 @@ try:
     source, target, truth = pair.source, pair.target, pair.truth
     name = f"3DMatch {pair.scene} fragments {pair.j} -> {pair.i} ({pair.overlap:.0%} overlap)"
 except (FileNotFoundError, StopIteration):
-    target = synthetic_room(20000, seed=1)
+    target = make_room(20000, seed=1)
     motion = random_rigid_motion(seed=3)
-    source = synthetic_room(20000, seed=2) @ motion[:3, :3].T + motion[:3, 3]
+    source = make_room(20000, seed=2) @ motion[:3, :3].T + motion[:3, 3]
     truth = np.linalg.inv(motion)
     name = "two samplings of a synthetic room"
 

@@ -10,22 +10,16 @@ from hypothesis import strategies as st
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop._attributes import check_attributes, eigen_features
-from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.datasets import make_object, make_room
 
 SCENE = ("xyz", "normal", "eigen")
 SMALL = dict(n_neighbors=(16, 16), hop_sizes=(1.0, 0.5), lrf_neighbors=32)
 
 
 def _room(n: int = 3000, seed: int = 0) -> np.ndarray:
-    """A corner of a room: floor, two walls and a box on the floor, all planar pieces,
-    sampled exactly on their planes (the worst case for eigen features and normals)."""
-    rng = np.random.default_rng(seed)
-    m = n // 4
-    floor = np.c_[rng.uniform(0, 4, m), rng.uniform(0, 3, m), np.zeros(m)]
-    wall_a = np.c_[np.zeros(m), rng.uniform(0, 3, m), rng.uniform(0, 2.5, m)]
-    wall_b = np.c_[rng.uniform(0, 4, m), np.zeros(m), rng.uniform(0, 2.5, m)]
-    top = np.c_[rng.uniform(1, 2, m), rng.uniform(1, 1.6, m), np.full(m, 0.7)]
-    return np.vstack([floor, wall_a, wall_b, top])
+    """A corner of a room, every piece exactly planar (the worst case for eigen
+    features and normals)."""
+    return make_room(n, seed=seed)
 
 
 @pytest.fixture(scope="module")
