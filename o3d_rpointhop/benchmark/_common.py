@@ -10,7 +10,7 @@ import numpy as np
 
 from .._progress import progress_bar
 from ..open3d_interop import to_point_cloud
-from ..registration.settings import resolve_voxel_size
+from ..registration.settings import DEFAULT_GLOBAL_POINTS, resolve_voxel_size
 from ..rpointhop import RPointHopTransformer
 from .methods import METHODS, run_method
 from .metrics import is_symmetry, pair_errors, summarize
@@ -43,7 +43,7 @@ def register_resolution(pair) -> float:
     the 3DMatch benchmark takes the voxel from a ``RegistrationContext`` instead, which is
     exactly ``register()``'s. Kept as it is so that the bunny results stay comparable.)"""
     source, target = to_point_cloud(pair.source), to_point_cloud(pair.target)
-    return resolve_voxel_size(source, target, "auto", 2048)[0]
+    return resolve_voxel_size(source, target, "auto", DEFAULT_GLOBAL_POINTS)[0]
 
 
 def fixed_resolution(voxel: float) -> Callable[[object], float]:

@@ -244,7 +244,6 @@ def run_method(
         "rpointhop-scene": lambda: (
             register(source, target, shipped_scene_model(), seed=seed).transformation
         ),
-        "rpointhop-loso": lambda: register(source, target, descriptor, seed=seed).transformation,
         "rpointhop-ransac-icp-sym": lambda: (
             register(
                 source, target, descriptor, refine=["point_to_plane", "symmetry_check"], seed=seed
@@ -279,6 +278,8 @@ def run_method(
             ).transformation
         ),  # fmt: skip
     }
+    # The pair's leave-one-scene-out model goes through register() like any model.
+    runners["rpointhop-loso"] = runners["rpointhop-ransac-icp"]
     if name not in runners:
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says it.

@@ -56,6 +56,7 @@ def run_3dmatch(
     from ..datasets.threedmatch import load_3dmatch_pairs
     from ..fpfh import FPFHTransformer
     from ..registration.context import RegistrationContext
+    from ..registration.settings import DEFAULT_GLOBAL_POINTS, resolve_global_points
 
     methods = check_methods(methods, scenes=True)
     model = model if model is not None else default_descriptor()
@@ -121,11 +122,15 @@ def run_3dmatch(
     fmr = {name: [] for name in families}
     voxels = {}  # the resolution register() picks, per pair
     for pair in pairs:
-        context = RegistrationContext(pair.source, pair.target)
-        voxels[id(pair)] = context.voxel_size
+        # One context per global cloud size (FPFH and an unstated model share 2048).
+        contexts = {DEFAULT_GLOBAL_POINTS: RegistrationContext(pair.source, pair.target)}
+        voxels[id(pair)] = contexts[DEFAULT_GLOBAL_POINTS].voxel_size
         for name, method in families.items():
             descriptor = fpfh if method is None else descriptor_of(method, pair)
-            own = RegistrationContext(pair.source, pair.target, descriptor=descriptor)
+            size = resolve_global_points("auto", descriptor)
+            if size not in contexts:
+                contexts[size] = RegistrationContext(pair.source, pair.target, n_global_points=size)
+            own = contexts[size]
             fmr[name].append({
                 "pair": f"{pair.scene} {pair.i}-{pair.j}",
                 "benchmark": pair.benchmark,

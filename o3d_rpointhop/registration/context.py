@@ -15,7 +15,12 @@ import numpy as np
 import open3d as o3d
 
 from ..open3d_interop import to_point_cloud
-from .settings import RegistrationSettings, resolve_global_points, resolve_voxel_size
+from .settings import (
+    DEFAULT_GLOBAL_POINTS,
+    RegistrationSettings,
+    resolve_global_points,
+    resolve_voxel_size,
+)
 
 __all__ = ["RegistrationContext", "RegistrationWarning", "check_geometry", "global_points"]
 
@@ -238,7 +243,7 @@ class RegistrationContext:
         return self._normals[key]
 
 
-def global_points(points: Any, n_global_points: int = 2048) -> np.ndarray:
+def global_points(points: Any, n_global_points: int = DEFAULT_GLOBAL_POINTS) -> np.ndarray:
     """A cloud as ``register()``'s global step sees it when registered to itself:
     voxel-downsampled to about ``n_global_points`` points (as it is, if smaller), in the
     cloud's own coordinates. What a model for ``register()`` should be fitted on."""

@@ -28,7 +28,7 @@ from ..correspondences import find_correspondences
 from ._ransac import ransac
 from .icp import PointToPlaneICP
 from .pipeline import MAX_SPREAD
-from .settings import RegistrationSettings
+from .settings import DEFAULT_GLOBAL_POINTS, RegistrationSettings
 from .steps import repeatable_open3d
 
 __all__ = ["MultiwayResult", "register_multiway"]
@@ -273,7 +273,7 @@ def register_multiway(
     clouds: list[Any],
     descriptor: Any = None,
     *,
-    n_global_points: int = 2048,
+    n_global_points: int = DEFAULT_GLOBAL_POINTS,
     min_fitness: float = MIN_EDGE_FITNESS,
     n_jobs: int | None = None,
     progress: bool | None = None,
