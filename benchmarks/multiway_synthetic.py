@@ -25,9 +25,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import FPFHTransformer, register_multiway
-from o3d_rpointhop.benchmark.protocols import crop_nearest
-from o3d_rpointhop.benchmark.report import split_timings
 from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.evaluation.protocols import crop_nearest
+from o3d_rpointhop.evaluation.report import split_timings
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -59,10 +59,15 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     scans, truth = make_scans(args.scans, args.seed)
     out = {
-        "settings": {"scans": args.scans, "n_jobs": args.n_jobs, "seed": args.seed,
-                     "tolerance": TOLERANCE, "machine": platform.processor() or platform.machine()},
+        "settings": {
+            "scans": args.scans,
+            "n_jobs": args.n_jobs,
+            "seed": args.seed,
+            "tolerance": TOLERANCE,
+            "machine": platform.processor() or platform.machine(),
+        },
         "methods": {},
-    }  # fmt: skip
+    }
     for method, descriptor in (("rpointhop", None), ("fpfh", FPFHTransformer())):
         start = time.perf_counter()
         result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, seed=args.seed)

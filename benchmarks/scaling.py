@@ -46,8 +46,8 @@ def child(method: str, n: int, repeats: int) -> None:
     import open3d as o3d
 
     from o3d_rpointhop import RPointHopTransformer
+    from o3d_rpointhop._utils.geometry import point_spacing
     from o3d_rpointhop.datasets import make_object
-    from o3d_rpointhop.fpfh import point_spacing
 
     points = make_object(n, shape_seed=3, sample_seed=n)
     spacing = point_spacing(points)

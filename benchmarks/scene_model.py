@@ -21,9 +21,9 @@ import time
 import numpy as np
 
 from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop.benchmark.methods import run_method
-from o3d_rpointhop.benchmark.metrics import match_inlier_ratio, rmse_3dmatch
 from o3d_rpointhop.datasets import load_3dmatch_pairs
+from o3d_rpointhop.evaluation.methods import run_method
+from o3d_rpointhop.evaluation.metrics import match_inlier_ratio, rmse_3dmatch
 from o3d_rpointhop.registration.context import RegistrationContext, global_points
 
 
@@ -65,12 +65,17 @@ def main() -> None:
                 voxel=context.voxel_size,
             )
             rmse = rmse_3dmatch(estimate, pair.truth, pair.information)
-            rows.append({
-                "pair": f"{pair.scene} {pair.i}-{pair.j}", "benchmark": pair.benchmark,
-                "model": name, "rmse": rmse, "registered": bool(rmse < 0.2),
-                "inlier_ratio": match_inlier_ratio(context, model, pair.truth),
-                "seconds": seconds,
-            })  # fmt: skip
+            rows.append(
+                {
+                    "pair": f"{pair.scene} {pair.i}-{pair.j}",
+                    "benchmark": pair.benchmark,
+                    "model": name,
+                    "rmse": rmse,
+                    "registered": bool(rmse < 0.2),
+                    "inlier_ratio": match_inlier_ratio(context, model, pair.truth),
+                    "seconds": seconds,
+                }
+            )
             print(json.dumps(rows[-1]), flush=True)
     summary = {}
     for bench in ("3DMatch", "3DLoMatch"):
@@ -85,8 +90,10 @@ def main() -> None:
                     ),
                 }
     for key, value in summary.items():
-        print(f"{key:24s} recall {value['registration_recall']:.1%}  "
-              f"feature-match recall {value['feature_match_recall']:.1%}")  # fmt: skip
+        print(
+            f"{key:24s} recall {value['registration_recall']:.1%}  "
+            f"feature-match recall {value['feature_match_recall']:.1%}"
+        )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"models": facts, "summary": summary, "pairs": rows}, fh, indent=1)

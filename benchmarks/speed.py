@@ -57,9 +57,9 @@ def test_object(data):
 
 def fit_memory_child(n_copies: int, budget_mb: float, data) -> None:
     """Run in a fresh process: fit on n_copies x the training set, print peak RSS."""
-    import o3d_rpointhop.rpointhop as module
+    import o3d_rpointhop.descriptors.pointhop._tree as module
 
-    module._FIT_CACHE_BYTES = int(budget_mb * 1024**2)
+    module.FIT_CACHE_BYTES = int(budget_mb * 1024**2)
     clouds, _ = training_clouds(data)
     rng = np.random.default_rng(0)
     many = [c + rng.normal(scale=1e-3, size=c.shape) for _ in range(n_copies) for c in clouds]

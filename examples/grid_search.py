@@ -41,6 +41,8 @@ print("recall (5 deg, two resolutions) per setting, mean over 2 folds of 2 pairs
 for params, score in zip(
     search.cv_results_["params"], search.cv_results_["mean_test_score"], strict=True
 ):
-    print(f"  radius={params['descriptor__radius']!s:5}  "
-          f"mutual_filter={params['global__mutual_filter']!s:5}  recall={score:.2f}")  # fmt: skip
+    print(
+        f"  radius={params['descriptor__radius']!s:5}  "
+        f"mutual_filter={params['global__mutual_filter']!s:5}  recall={score:.2f}"
+    )
 print("best:", search.best_params_)

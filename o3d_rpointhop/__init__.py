@@ -1,11 +1,17 @@
 """o3d-rpointhop: unsupervised, rotation-invariant R-PointHop point descriptors and
-global-to-local registration for Open3D and scikit-learn."""
+global-to-local registration for Open3D and scikit-learn.
+
+The package is built in layers that import one way (docs/design.md): ``_utils`` (leaves)
+<- the public tools (``transforms``, ``open3d_interop``, ``io``, ``datasets``,
+``plotting``) <- ``descriptors`` <- ``registration`` <- ``batch``, ``evaluation``
+(benchmarks) and ``cli``. This module only re-exports.
+"""
 
 from ._version import __version__
-from .correspondences import Correspondences, find_correspondences
-from .fpfh import FPFHTransformer
+from .descriptors import FPFHTransformer, RPointHopTransformer
 from .open3d_interop import to_open3d_feature, to_point_cloud
 from .registration import (
+    Correspondences,
     FGRGlobal,
     GeneralizedICP,
     MultiScaleICP,
@@ -19,11 +25,11 @@ from .registration import (
     RegistrationWarning,
     SVDGlobal,
     SymmetryCheck,
+    find_correspondences,
     register,
     register_multiway,
     registration_scorer,
 )
-from .rpointhop import RPointHopTransformer
 from .transforms import rigid_transform
 
 __all__ = [

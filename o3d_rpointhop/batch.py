@@ -18,70 +18,17 @@ whole of the parallelism.
 
 from __future__ import annotations
 
-import copy
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
-from joblib import Parallel, delayed
 
-from ._progress import progress_bar
-from ._validation import as_points
+from ._utils.parallel import parallel_map, single_threaded
+from ._utils.validation import as_points
+from .registration import register
+from .registration.defaults import default_descriptor
 
 __all__ = ["parallel_map", "transform_many", "register_many"]
-
-
-def parallel_map(
-    func: Callable,
-    items: Sequence[tuple],
-    *,
-    n_jobs: int | None = None,
-    progress: bool | None = None,
-    desc: str = "",
-    unit: str = "item",
-) -> list:
-    """``[func(*item) for item in items]`` through ``joblib.Parallel``, in order.
-
-    Parameters
-    ----------
-    func : callable
-    items : sequence of tuple
-        Positional arguments of each call.
-    n_jobs : int, default=None
-        joblib's ``n_jobs``; ``None`` defers to ``joblib.parallel_config`` (1 without
-        one).
-    progress : bool, default=None
-        A bar on stderr as results come in; ``None``: only when stderr is a terminal.
-    desc, unit : str
-        The bar's label and unit.
-    """
-    items = list(items)
-    bar = progress_bar(len(items), desc=desc, unit=unit, enabled=progress, large=len(items) > 1)
-    results = Parallel(n_jobs=n_jobs, return_as="generator")(delayed(func)(*item) for item in items)
-    out = []
-    try:
-        for result in results:
-            out.append(result)
-            if bar is not None:
-                bar.update(1)
-    finally:
-        if bar is not None:
-            bar.close()
-    return out
-
-
-def _single_threaded(estimator: Any) -> Any:
-    """A shallow copy that runs one thread and shows no bar per task (the tasks are the
-    parallelism); the caller's object is left as it is."""
-    if estimator is None or not hasattr(estimator, "get_params"):
-        return estimator
-    params = estimator.get_params(deep=False)
-    updates = {k: v for k, v in (("n_jobs", None), ("progress", False)) if k in params}
-    if not updates:
-        return estimator
-    worker = copy.copy(estimator)
-    worker.set_params(**updates)
-    return worker
 
 
 def _describe(descriptor: Any, points: np.ndarray) -> np.ndarray:
@@ -114,7 +61,7 @@ def transform_many(
     list of ndarray of shape (n_i, n_features)
     """
     arrays = [as_points(c, f"clouds[{i}]") for i, c in enumerate(clouds)]
-    worker = _single_threaded(descriptor)
+    worker = single_threaded(descriptor)
     return parallel_map(
         _describe,
         [(worker, a) for a in arrays],
@@ -126,8 +73,6 @@ def transform_many(
 
 
 def _register(source: np.ndarray, target: np.ndarray, descriptor: Any, options: dict):
-    from .registration import register
-
     return register(source, target, descriptor, **options)
 
 
@@ -160,8 +105,6 @@ def register_many(
     list of RegistrationResult
         In the order of ``pairs``; the same as registering each pair alone.
     """
-    from .rpointhop import default_descriptor
-
     items = []
     for k, pair in enumerate(pairs):
         try:
@@ -169,7 +112,7 @@ def register_many(
         except (TypeError, ValueError):
             raise ValueError(f"pairs[{k}] is not a (source, target) pair") from None
         items.append((as_points(source, f"pairs[{k}][0]"), as_points(target, f"pairs[{k}][1]")))
-    worker = _single_threaded(descriptor if descriptor is not None else default_descriptor())
+    worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
     return parallel_map(
         _register,
         [(s, t, worker, options) for s, t in items],

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from ._validation import as_points
+from ._utils.validation import as_points
 
 __all__ = ["read_cloud", "write_cloud", "OPEN3D_FORMATS"]
 

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
-from ._validation import as_points, is_open3d_cloud
+from ._utils.validation import as_points, is_open3d_cloud
 
 __all__ = ["to_open3d_feature", "to_point_cloud"]
 

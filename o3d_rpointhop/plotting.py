@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_points
+from ._utils.validation import as_points
 from .transforms import apply_transform
 
 __all__ = ["save_registration_png", "require_matplotlib"]

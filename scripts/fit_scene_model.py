@@ -22,7 +22,7 @@ import argparse
 import time
 from pathlib import Path
 
-from o3d_rpointhop.benchmark.scene_models import (
+from o3d_rpointhop.evaluation.scene_models import (
     FIT_POINTS,
     SCENE_PARAMS,
     TRAINING_SCENES,

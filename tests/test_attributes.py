@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop._attributes import check_attributes, eigen_features
 from o3d_rpointhop.datasets import make_object, make_room
+from o3d_rpointhop.descriptors.pointhop._attributes import check_attributes, eigen_features
 
 SCENE = ("xyz", "normal", "eigen")
 SMALL = dict(n_neighbors=(16, 16), hop_sizes=(1.0, 0.5), lrf_neighbors=32)
@@ -80,9 +80,12 @@ def test_planes_edges_and_duplicates_stay_finite(scene_model):
 def test_wide_lrf_and_round_trip(tmp_path):
     clouds = [_room(3000, s) for s in range(2)]
     model = RPointHopTransformer(
-        attributes=SCENE, lrf_neighbors=256, n_neighbors=(32, 32), hop_sizes=(1.0, 0.5),
+        attributes=SCENE,
+        lrf_neighbors=256,
+        n_neighbors=(32, 32),
+        hop_sizes=(1.0, 0.5),
         random_state=0,
-    ).fit(clouds)  # fmt: skip
+    ).fit(clouds)
     model.training_scenes_ = ["room-a", "room-b"]
     model.save(tmp_path / "scene.npz")
     loaded = RPointHopTransformer.load(tmp_path / "scene.npz")

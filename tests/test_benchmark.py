@@ -8,16 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from o3d_rpointhop.benchmark.methods import METHODS, run_method
-from o3d_rpointhop.benchmark.metrics import (
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.evaluation.methods import METHODS, run_method
+from o3d_rpointhop.evaluation.metrics import (
     is_symmetry,
     match_inlier_ratio,
     pair_errors,
     rmse_3dmatch,
     summarize,
 )
-from o3d_rpointhop.benchmark.protocols import PROTOCOLS, crop_nearest, make_pairs
-from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.evaluation.protocols import PROTOCOLS, crop_nearest, make_pairs
 from o3d_rpointhop.transforms import apply_transform
 
 
@@ -124,9 +124,23 @@ def test_every_method_runs(shapes):
 def test_benchmark_command_writes_json_markdown_and_plots(shared_data, tmp_path, capsys):
     from o3d_rpointhop.cli import main
 
-    args = ["benchmark", "modelnet40", "--data", str(shared_data), "--output", str(tmp_path),
-            "--max-shapes", "2", "--protocol", "paper", "resampled", "angle-sweep",
-            "--methods", "rpointhop-ransac-icp,icp", "--no-progress"]  # fmt: skip
+    args = [
+        "benchmark",
+        "modelnet40",
+        "--data",
+        str(shared_data),
+        "--output",
+        str(tmp_path),
+        "--max-shapes",
+        "2",
+        "--protocol",
+        "paper",
+        "resampled",
+        "angle-sweep",
+        "--methods",
+        "rpointhop-ransac-icp,icp",
+        "--no-progress",
+    ]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "## resampled" in out and "R-PointHop + RANSAC + point-to-plane ICP" in out
@@ -134,8 +148,16 @@ def test_benchmark_command_writes_json_markdown_and_plots(shared_data, tmp_path,
     paper = results["protocols"]["paper"]["summary"]
     assert paper["rpointhop-ransac-icp"]["success_rate"] == 1.0
     assert set(results["protocols"]["angle-sweep"]["summary"]) == {
-        "0", "15", "30", "45", "60", "90", "120", "150", "180"
-    }  # fmt: skip
+        "0",
+        "15",
+        "30",
+        "45",
+        "60",
+        "90",
+        "120",
+        "150",
+        "180",
+    }
     assert (tmp_path / "modelnet40_success_rate.png").stat().st_size > 1000
     assert (tmp_path / "modelnet40_angle-sweep.png").stat().st_size > 1000
     # repeatable: the same seed gives the same numbers
@@ -210,7 +232,7 @@ def _fake_results(seconds: float) -> dict:
             "python": "3.11",
             "open3d": "0.20",
             "numpy": "2",
-        },  # fmt: skip
+        },
         "protocols": {
             "scans": {
                 "description": "two pairs",
@@ -223,7 +245,7 @@ def _fake_results(seconds: float) -> dict:
 
 
 def test_reports_keep_timings_apart(tmp_path):
-    from o3d_rpointhop.benchmark.report import split_timings, write_report
+    from o3d_rpointhop.evaluation.report import split_timings, write_report
 
     kept, timed = split_timings(_fake_results(1.0))
     assert "seconds" not in json.dumps(kept) and "box" not in json.dumps(kept)

@@ -6,11 +6,16 @@ import numpy as np
 import pytest
 from conftest import random_motion
 
-from o3d_rpointhop._lrf import local_reference_frames, median_along_last, project
-from o3d_rpointhop._neighbors import drop_self, fps_subsets, knn
-from o3d_rpointhop._octants import OctantPooling, coordinate_octant_means, octant_index
-from o3d_rpointhop._saab import MomentAccumulator, apply_saab, fit_saab
 from o3d_rpointhop.datasets import make_blob
+from o3d_rpointhop.descriptors.pointhop._frames import (
+    local_reference_frames,
+    median_along_last,
+    project,
+)
+from o3d_rpointhop.descriptors.pointhop._neighbors import drop_self, knn
+from o3d_rpointhop.descriptors.pointhop._octants import OctantPooling, octant_index, octant_means
+from o3d_rpointhop.descriptors.pointhop._saab import MomentAccumulator, apply_saab, fit_saab
+from o3d_rpointhop.descriptors.pointhop._sampling import fps_subsets
 
 
 def _offsets(points, k):
@@ -96,12 +101,12 @@ def test_octant_boundary_points_count_as_positive():
     np.testing.assert_array_equal(octant_index(local), [[7, 7, 7]])
 
 
-def test_coordinate_octant_means_against_loop():
+def test_octant_means_of_coordinates_against_loop():
     rng = np.random.default_rng(3)
     local = rng.normal(size=(3, 4, 10))
     local[0, 2] = np.abs(local[0, 2])  # query 2: every first coordinate positive
     octant = octant_index(local)
-    attrs = coordinate_octant_means(local, octant)
+    attrs = octant_means(local, octant)
     for q in range(4):
         for o in range(8):
             members = octant[q] == o

@@ -144,10 +144,20 @@ def _pair(tmp_path):
 def test_register_writes_aligned_cloud_and_transforms(tmp_path, capsys):
     src, tgt, truth = _pair(tmp_path)
     out = tmp_path / "aligned.ply"
-    code = main([
-        "register", src, tgt, "--refine", "point_to_plane", "-o", str(out),
-        "--transform", str(tmp_path / "T.txt"), "--json",
-    ])  # fmt: skip
+    code = main(
+        [
+            "register",
+            src,
+            tgt,
+            "--refine",
+            "point_to_plane",
+            "-o",
+            str(out),
+            "--transform",
+            str(tmp_path / "T.txt"),
+            "--json",
+        ]
+    )
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(np.array(summary["transformation"]), truth, atol=1e-6)

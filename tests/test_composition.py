@@ -1,10 +1,6 @@
-"""Registration as scikit-learn composition: nested parameters, model selection, settings,
-and a package layout without import cycles."""
+"""Registration as scikit-learn composition: nested parameters, model selection, settings."""
 
 from __future__ import annotations
-
-import ast
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,8 +21,6 @@ from o3d_rpointhop import (
 )
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.transforms import apply_transform
-
-PACKAGE = Path(__file__).resolve().parents[1] / "o3d_rpointhop"
 
 
 def _pairs(n: int, seed: int = 0):
@@ -59,8 +53,13 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
     assert copy.get_params()["descriptor__lrf_neighbors"] == 32
     assert copy.descriptor is not pipe.descriptor
     assert set(pipe.get_params(deep=False)) == {
-        "steps", "descriptor", "voxel_size", "n_global_points", "seed", "settings",
-    }  # fmt: skip
+        "steps",
+        "descriptor",
+        "voxel_size",
+        "n_global_points",
+        "seed",
+        "settings",
+    }
 
 
 def test_grid_search_over_descriptor_and_step_parameters():
@@ -75,8 +74,13 @@ def test_grid_search_over_descriptor_and_step_parameters():
     )
     search.fit(X, y)
     assert search.best_params_ == {"descriptor__radius": "auto", "icp__max_iteration": 30}
-    scores = dict(zip(map(str, search.cv_results_["param_descriptor__radius"]),
-                      search.cv_results_["mean_test_score"], strict=True))  # fmt: skip
+    scores = dict(
+        zip(
+            map(str, search.cv_results_["param_descriptor__radius"]),
+            search.cv_results_["mean_test_score"],
+            strict=True,
+        )
+    )
     assert scores["auto"] == 1.0 and scores["0.0001"] == 0.0
     assert search.best_estimator_.descriptor_.radius == "auto"
     assert search.score(X, y) == 1.0
@@ -145,57 +149,3 @@ def test_settings_are_checked():
         register(make_object(300), make_object(300), settings={"ransac_factor": 2.0})
     bound = RegistrationSettings(normal_radius_factor=3.0).at(0.5)
     assert bound.normal_radius == 1.5 and bound.feature_radius == 2.5
-
-
-def _module_imports(path: Path) -> set[str]:
-    """Modules of the package that ``path`` imports when it is imported (module level,
-    not inside functions, not under ``TYPE_CHECKING``)."""
-    name = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts)
-    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-    package = package.removesuffix(".__init__")
-    found = set()
-    for node in ast.parse(path.read_text()).body:
-        if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
-                target = f"{base}.{node.module}" if node.module else base
-            else:
-                target = node.module or ""
-            if target.startswith("o3d_rpointhop"):
-                for alias in node.names:
-                    sub = f"{target}.{alias.name}"
-                    found.add(sub if _exists(sub) else target)
-        elif isinstance(node, ast.Import):
-            found |= {a.name for a in node.names if a.name.startswith("o3d_rpointhop.")}
-    return {m.removesuffix(".__init__") for m in found}
-
-
-def _exists(module: str) -> bool:
-    parts = module.split(".")[1:]
-    return (PACKAGE.joinpath(*parts).with_suffix(".py")).is_file() or (
-        PACKAGE.joinpath(*parts) / "__init__.py"
-    ).is_file()
-
-
-def test_no_import_cycles_between_modules():
-    graph = {}
-    for path in PACKAGE.rglob("*.py"):
-        name = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts)
-        graph[name.removesuffix(".__init__")] = _module_imports(path)
-    cycles = []
-
-    def visit(node, trail):
-        for nxt in graph.get(node, ()):
-            if nxt in trail:
-                cycles.append(trail[trail.index(nxt) :] + [nxt])
-            elif nxt not in done:
-                visit(nxt, [*trail, nxt])
-        done.add(node)
-
-    done: set[str] = set()
-    for start in sorted(graph):
-        if start not in done:
-            visit(start, [start])
-    assert graph["o3d_rpointhop.registration.steps"] == {"o3d_rpointhop.registration.context"}
-    assert "o3d_rpointhop.rpointhop" not in graph["o3d_rpointhop._persistence"]
-    assert cycles == []

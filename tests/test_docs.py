@@ -95,8 +95,12 @@ def test_registration_docs_tables_match_the_code():
     text = (ROOT / "docs" / "registration.md").read_text()
     rows = re.findall(r"^\| `(\w+)\(([^`]*)\)` \|", text, re.M)
     assert {name for name, _ in rows} >= {
-        "SVDGlobal", "RANSACGlobal", "FGRGlobal", "MultiScaleICP", "SymmetryCheck",
-    }  # fmt: skip
+        "SVDGlobal",
+        "RANSACGlobal",
+        "FGRGlobal",
+        "MultiScaleICP",
+        "SymmetryCheck",
+    }
     for name, args in rows:
         params = getattr(o3d_rpointhop, name)().get_params()
         for arg in filter(None, (a.strip() for a in re.split(r",\s*(?![^()]*\))", args))):

@@ -8,11 +8,11 @@ from conftest import random_motion, relative_difference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import o3d_rpointhop._hops as hops
-import o3d_rpointhop._octants as octants
+import o3d_rpointhop.descriptors.pointhop._geometry as hops
+import o3d_rpointhop.descriptors.pointhop._octants as octants
 from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop._sampling import hop_subsets, poisson_disk_subset
 from o3d_rpointhop.datasets import make_blob, make_object
+from o3d_rpointhop.descriptors.pointhop._sampling import hop_subsets, poisson_disk_subset
 
 
 # ----------------------------------------------------------------------------- sampling
@@ -48,7 +48,7 @@ def test_hop_subsets_are_nested_and_auto_switches_at_the_threshold(monkeypatch):
     for method in ("fps", "poisson"):
         big, small = hop_subsets(points, [2000, 900], method)
         assert len(big) == 2000 and len(small) == 900 and np.isin(small, big).all()
-    import o3d_rpointhop._sampling as sampling
+    import o3d_rpointhop.descriptors.pointhop._sampling as sampling
 
     monkeypatch.setattr(sampling, "FPS_MAX_POINTS", 2999)
     np.testing.assert_array_equal(

@@ -96,9 +96,13 @@ def _forms(points):
 @pytest.mark.parametrize("form", list(_forms(OBJECT)))
 def test_every_array_form_is_accepted_and_never_written(model, form, tmp_path):
     value = _forms(OBJECT)[form]
-    before = np.array(value if not hasattr(value, "point") and not hasattr(value, "points")
-                      else (value.point.positions.numpy() if hasattr(value, "point")
-                            else np.asarray(value.points)))  # fmt: skip
+    before = np.array(
+        value
+        if not hasattr(value, "point") and not hasattr(value, "points")
+        else (
+            value.point.positions.numpy() if hasattr(value, "point") else np.asarray(value.points)
+        )
+    )
     for descriptor in (model, FPFHTransformer(radius="auto", normal_radius="auto")):
         out = descriptor.transform(value)
         assert out.shape[0] == len(OBJECT) and np.isfinite(out).all()
@@ -106,9 +110,13 @@ def test_every_array_form_is_accepted_and_never_written(model, form, tmp_path):
         warnings.simplefilter("ignore", RegistrationWarning)
         result = register(value, before.astype(np.float64), model)  # the same coordinates
     np.testing.assert_allclose(result.transformation, np.eye(4), atol=1e-6)
-    after = np.array(value if not hasattr(value, "point") and not hasattr(value, "points")
-                     else (value.point.positions.numpy() if hasattr(value, "point")
-                           else np.asarray(value.points)))  # fmt: skip
+    after = np.array(
+        value
+        if not hasattr(value, "point") and not hasattr(value, "points")
+        else (
+            value.point.positions.numpy() if hasattr(value, "point") else np.asarray(value.points)
+        )
+    )
     np.testing.assert_array_equal(before, after)
 
 

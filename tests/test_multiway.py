@@ -7,8 +7,8 @@ import pytest
 from conftest import random_motion
 
 from o3d_rpointhop import register_multiway
-from o3d_rpointhop.benchmark.protocols import crop_nearest
 from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.evaluation.protocols import crop_nearest
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
 
 

@@ -106,8 +106,8 @@ def test_symmetry_check_puts_right_the_turned_over_shapes_of_the_noisy_protocol(
     1624-D descriptor with Open3D's RANSAC returned them turned by 180 degrees. Started
     from that turned-over pose, ICP alone stays there; the symmetry check puts it right."""
     from o3d_rpointhop import register
-    from o3d_rpointhop.benchmark.protocols import make_pairs
-    from o3d_rpointhop.registration.symmetry import twin_transformations
+    from o3d_rpointhop.evaluation.protocols import make_pairs
+    from o3d_rpointhop.registration.quality import twin_transformations
     from o3d_rpointhop.transforms import rotation_error_deg
 
     _, test = modelnet
@@ -141,11 +141,12 @@ def test_symmetry_check_puts_right_the_turned_over_shapes_of_the_noisy_protocol(
 
 
 def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
-    from o3d_rpointhop.benchmark.report import write_report
-    from o3d_rpointhop.benchmark.threedmatch import run_3dmatch
+    from o3d_rpointhop.evaluation.report import write_report
+    from o3d_rpointhop.evaluation.threedmatch import run_3dmatch
 
-    results = run_3dmatch(["icp", "rpointhop-scene"], data=shared_data, max_pairs=2,
-                          scenes=["hotel3"], progress=False)  # fmt: skip
+    results = run_3dmatch(
+        ["icp", "rpointhop-scene"], data=shared_data, max_pairs=2, scenes=["hotel3"], progress=False
+    )
     scene = "sun3d-hotel_umd-maryland_hotel3"
     # The shipped scene model was fitted on hotel3: the run says so.
     assert scene in results["settings"]["model_training_scenes"]

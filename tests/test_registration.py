@@ -25,7 +25,7 @@ from o3d_rpointhop import (
     to_open3d_feature,
 )
 from o3d_rpointhop.datasets import make_object
-from o3d_rpointhop.registration.global_estimators import tuple_test
+from o3d_rpointhop.registration.steps.fgr import tuple_test
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg, translation_error
 
 
@@ -128,7 +128,7 @@ def test_nearest_and_mutual_matches():
 def test_nearest_descriptors_are_the_exact_neighbours(n_refs, k):
     from scipy.spatial.distance import cdist
 
-    from o3d_rpointhop.correspondences import nearest_descriptors
+    from o3d_rpointhop.registration.correspondences import nearest_descriptors
 
     rng = np.random.default_rng(n_refs + k)
     refs = rng.normal(size=(n_refs, 24)).astype(np.float32)
@@ -213,11 +213,17 @@ def test_ransac_through_open3d_feature_matching_agrees(model, target):
     tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target))
     o3d.utility.random.seed(0)
     result = reg.registration_ransac_based_on_feature_matching(
-        src, tgt, to_open3d_feature(model.transform(source)),
-        to_open3d_feature(model.transform(target)), True, 0.05,
-        reg.TransformationEstimationPointToPoint(False), 3, [],
+        src,
+        tgt,
+        to_open3d_feature(model.transform(source)),
+        to_open3d_feature(model.transform(target)),
+        True,
+        0.05,
+        reg.TransformationEstimationPointToPoint(False),
+        3,
+        [],
         reg.RANSACConvergenceCriteria(100000, 0.999),
-    )  # fmt: skip
+    )
     assert_close_pose(np.asarray(result.transformation), truth, 1e-4, 1e-6)
 
 
@@ -243,10 +249,15 @@ def test_tuple_test_drops_inconsistent_matches():
 # ----------------------------------------------------------------------------- refinement
 @pytest.mark.parametrize(
     "step",
-    [PointToPointICP(), PointToPlaneICP(), PointToPlaneICP(kernel="tukey"), GeneralizedICP(),
-     MultiScaleICP()],
+    [
+        PointToPointICP(),
+        PointToPlaneICP(),
+        PointToPlaneICP(kernel="tukey"),
+        GeneralizedICP(),
+        MultiScaleICP(),
+    ],
     ids=["point_to_point", "point_to_plane", "point_to_plane_tukey", "generalized", "multiscale"],
-)  # fmt: skip
+)
 def test_icp_steps_converge_from_a_nearby_start(target, step):
     source, truth = moved_copy(target, 6, permute=False)
     nudge = np.eye(4)
@@ -277,7 +288,7 @@ def test_multiscale_pulls_in_a_poor_start(target):
 
 
 def test_point_to_point_has_no_kernel_and_bad_kernels_are_named(target):
-    with pytest.raises(ValueError, match="'kernel' parameter of PointToPlaneICP must be"):
+    with pytest.raises(ValueError, match="step 'refine': The 'kernel' parameter of PointToPlane"):
         register(target, target, global_method=None, refine=PointToPlaneICP(kernel="fancy"))
 
 
@@ -336,8 +347,9 @@ def test_fpfh_descriptor_goes_through_the_same_pipeline(target):
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        (dict(global_method="teaser"), "global_method must be one of"),
-        (dict(refine="icp"), "refine must be one of"),
+        (dict(global_method="teaser"), "'global_method' parameter of register must be"),
+        (dict(refine="icp"), "'refine' parameter of register must be"),
+        (dict(refine=["point_to_plane", "icp"]), "refine must hold names of"),
         (dict(global_method=None, refine=None), "nothing to do"),
         (dict(voxel_size=-1.0), "'voxel_size' parameter .* range"),
         (dict(voxel_size="fine"), "'voxel_size' parameter .* among {'auto'}"),

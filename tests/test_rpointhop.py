@@ -11,7 +11,7 @@ import pytest
 from conftest import random_motion, relative_difference
 from scipy.spatial import cKDTree
 
-import o3d_rpointhop.rpointhop as rpointhop_module
+import o3d_rpointhop.descriptors.pointhop._tree as tree_module
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import make_blob, make_object
 
@@ -232,7 +232,7 @@ def test_fit_subsample_is_seeded():
 def test_streaming_fit_equals_cached_fit(train_clouds, monkeypatch):
     """With no memory for caching, every hop recomputes the clouds: same model."""
     cached = RPointHopTransformer().fit(train_clouds)
-    monkeypatch.setattr(rpointhop_module, "_FIT_CACHE_BYTES", 0)
+    monkeypatch.setattr(tree_module, "FIT_CACHE_BYTES", 0)
     streamed = RPointHopTransformer().fit(train_clouds)
     for a, b in zip(cached.kernels_, streamed.kernels_, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
@@ -345,7 +345,7 @@ def test_transform_keeps_blas_to_one_thread(fitted, cloud, monkeypatch):
     setting is back afterwards."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    import o3d_rpointhop.rpointhop as module
+    module = tree_module
 
     def blas_threads():
         return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}

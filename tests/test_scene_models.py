@@ -8,18 +8,23 @@ import json
 import numpy as np
 import pytest
 
-from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop.benchmark._common import check_methods
-from o3d_rpointhop.benchmark.methods import DEFAULT_METHODS, METHODS
-from o3d_rpointhop.benchmark.scene_models import (
+from o3d_rpointhop import (
+    PointToPlaneICP,
+    RegistrationPipeline,
+    RPointHopTransformer,
+    register,
+)
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.evaluation._common import check_methods
+from o3d_rpointhop.evaluation.methods import DEFAULT_METHODS, METHODS
+from o3d_rpointhop.evaluation.scene_models import (
     REGISTRATION_POINTS,
     leave_one_scene_out,
     scene_names,
 )
-from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.io import write_cloud
 from o3d_rpointhop.registration.context import RegistrationContext
-from o3d_rpointhop.registration.settings import DEFAULT_GLOBAL_POINTS, resolve_global_points
+from o3d_rpointhop.registration.defaults import DEFAULT_GLOBAL_POINTS, resolve_global_points
 
 SMALL = dict(n_neighbors=(16, 16), hop_sizes=(1.0, 0.5), lrf_neighbors=32)
 
@@ -38,9 +43,14 @@ def test_resolve_global_points():
     assert resolve_global_points("auto") == DEFAULT_GLOBAL_POINTS == 2048
     assert resolve_global_points("auto", _Stated()) == 1000
     assert resolve_global_points(4096, _Stated()) == 4096  # the call wins
-    for bad in (2, 0, 1.5, True, "many"):
+    cloud = make_object(200)
+    for bad in (2, 0, 1.5, True, "many"):  # refused by the public entry points
         with pytest.raises(ValueError, match="n_global_points"):
-            resolve_global_points(bad)
+            register(cloud, cloud, n_global_points=bad)
+        with pytest.raises(ValueError, match="n_global_points"):
+            RegistrationPipeline([("icp", PointToPlaneICP())], n_global_points=bad).register(
+                cloud, cloud
+            )
 
 
 def test_the_global_step_takes_the_descriptors_size():

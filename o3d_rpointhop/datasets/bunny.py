@@ -14,9 +14,17 @@ from ._paths import data_home
 __all__ = ["BunnyScan", "load_bunny", "load_dragon", "read_bun_conf", "BUNNY_SCANS"]
 
 BUNNY_SCANS = (
-    "bun000", "bun045", "bun090", "bun180", "bun270", "bun315",
-    "chin", "ear_back", "top2", "top3",
-)  # fmt: skip
+    "bun000",
+    "bun045",
+    "bun090",
+    "bun180",
+    "bun270",
+    "bun315",
+    "chin",
+    "ear_back",
+    "top2",
+    "top3",
+)
 
 
 @dataclass

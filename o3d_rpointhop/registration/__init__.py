@@ -1,23 +1,36 @@
 """Registration: global estimates from descriptors, then ICP refinement chains.
 
-Modules, one concept each: :mod:`.settings` (the resolution and every distance derived
-from it), :mod:`.context` (the clouds and caches one registration shares),
-:mod:`.steps` (the step base class), :mod:`.global_estimators` and :mod:`.icp` (the
-steps), :mod:`.symmetry`, :mod:`.pipeline` (chains and ``register``), :mod:`.scoring`
-(recall for model selection) and :mod:`.multiway` (pose graphs over many scans).
+Modules, one concept each: :mod:`.defaults` (the descriptor and global cloud size used
+when none is given), :mod:`.settings` (the resolution and every distance derived from
+it), :mod:`.context` (the clouds and caches one registration shares),
+:mod:`.correspondences` (descriptor matches), :mod:`.result` (what a registration
+returns), :mod:`.quality` (refused input and the result's flags), the steps in
+:mod:`.steps`, :mod:`.pipeline` (chains and ``register``), :mod:`.scoring` (recall for
+model selection) and :mod:`.multiway` (pose graphs over many scans).
 """
 
-from .context import RegistrationContext, RegistrationWarning
-from .global_estimators import FGRGlobal, RANSACGlobal, SVDGlobal
-from .icp import GeneralizedICP, MultiScaleICP, PointToPlaneICP, PointToPointICP
+from .context import RegistrationContext
+from .correspondences import Correspondences, find_correspondences
 from .multiway import MultiwayResult, register_multiway
-from .pipeline import RegistrationPipeline, RegistrationResult, register
+from .pipeline import RegistrationPipeline, register
+from .quality import RegistrationWarning
+from .result import RegistrationResult, StepResult
 from .scoring import registration_recall, registration_scorer
 from .settings import RegistrationSettings
-from .steps import RegistrationStep, StepResult
-from .symmetry import SymmetryCheck
+from .steps import (
+    FGRGlobal,
+    GeneralizedICP,
+    MultiScaleICP,
+    PointToPlaneICP,
+    PointToPointICP,
+    RANSACGlobal,
+    RegistrationStep,
+    SVDGlobal,
+    SymmetryCheck,
+)
 
 __all__ = [
+    "Correspondences",
     "FGRGlobal",
     "GeneralizedICP",
     "MultiScaleICP",
@@ -34,6 +47,7 @@ __all__ = [
     "SVDGlobal",
     "StepResult",
     "SymmetryCheck",
+    "find_correspondences",
     "register",
     "register_multiway",
     "registration_recall",

@@ -8,90 +8,22 @@ clouds; :meth:`RegistrationContext.to_world` maps their transformations back.
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import numpy as np
 import open3d as o3d
 
+from .._utils.geometry import point_spacing
+from .._utils.threads import repeatable_open3d
 from ..open3d_interop import to_point_cloud
-from .settings import (
-    DEFAULT_GLOBAL_POINTS,
-    RegistrationSettings,
-    resolve_global_points,
-    resolve_voxel_size,
-)
+from .defaults import DEFAULT_GLOBAL_POINTS, resolve_global_points
+from .quality import check_geometry
+from .result import StepResult
+from .settings import RegistrationSettings, resolve_voxel_size
 
-__all__ = ["RegistrationContext", "RegistrationWarning", "check_geometry", "global_points"]
+__all__ = ["RegistrationContext", "global_points"]
 
-# A cloud whose second principal extent is below this share of its first is a line, and
-# whose third is below it, a plane (relative standard deviations).
-_COLLINEAR = 1e-6
-_PLANAR = 1e-4
-# float32 coordinates whose rounding step exceeds this share of the cloud's extent.
-_FLOAT32_RESOLUTION = 1e-5
-
-
-class RegistrationWarning(UserWarning):
-    """A registration result to treat with care: degenerate input, or a flagged result."""
-
-
-def _raw_float32(cloud: Any) -> np.ndarray | None:
-    """The caller's coordinates when they are float32 (numpy or tensor Open3D)."""
-    if isinstance(cloud, np.ndarray) and cloud.dtype == np.float32:
-        return cloud
-    point = getattr(cloud, "point", None)
-    if point is not None and "positions" in point:
-        positions = point.positions
-        if "Float32" in str(positions.dtype):
-            return positions.cpu().numpy()
-    return None
-
-
-def check_geometry(points: np.ndarray, name: str, raw: Any = None) -> None:
-    """Refuse clouds a rigid registration cannot be defined on, warn about risky ones.
-
-    Raises
-    ------
-    ValueError
-        If every point coincides, or the points lie on one line (a rotation about it
-        cannot be recovered).
-
-    Warns
-    -----
-    RegistrationWarning
-        For a planar cloud (in-plane turns and flips may be undetermined; see
-        ``RegistrationResult.ambiguous``), and for float32 coordinates whose rounding
-        step is coarse for the cloud's size (survey coordinates: pass float64).
-    """
-    if not np.any(points != points[0]):
-        raise ValueError(f"{name} has no spatial extent: all its points coincide")
-    spread = np.sqrt(np.clip(np.linalg.eigvalsh(np.cov(points.T)), 0.0, None))[::-1]
-    if spread[1] <= _COLLINEAR * spread[0]:
-        raise ValueError(
-            f"{name} is collinear (its points lie on one line): a rotation about that line "
-            "cannot be recovered, so there is no rigid registration to find"
-        )
-    if spread[2] <= _PLANAR * spread[0]:
-        warnings.warn(
-            f"{name} is planar (flat to {spread[2] / spread[0]:.1e} of its size): turns "
-            "within the plane and flips may be undetermined; check result.ambiguous",
-            RegistrationWarning,
-            stacklevel=4,
-        )
-    raw32 = _raw_float32(raw)
-    if raw32 is not None:
-        step = float(np.spacing(np.float32(np.abs(raw32).max())))
-        extent = float(points.max(axis=0).max() - points.min(axis=0).min())
-        if step > _FLOAT32_RESOLUTION * extent:
-            warnings.warn(
-                f"{name} holds float32 coordinates up to {np.abs(raw32).max():.6g}, where "
-                f"float32 resolves only {step:.3g}, coarse for a cloud {extent:.3g} across: "
-                "its points were already rounded before registration; pass float64 "
-                "(or coordinates relative to a local origin) for full precision",
-                RegistrationWarning,
-                stacklevel=4,
-            )
+reg = o3d.pipelines.registration
 
 
 class RegistrationContext:
@@ -102,16 +34,28 @@ class RegistrationContext:
     source, target : array-like (n, 3) or Open3D point cloud
         Copied: the caller's objects are never modified.
     voxel_size : float or "auto"
-        See :func:`~o3d_rpointhop.registration.settings.resolve_voxel_size`.
+        See :func:`~o3d_rpointhop.registration.settings.resolve_voxel_size`; with
+        ``global_clouds``, ``"auto"`` is the larger of their point spacings.
     n_global_points : int or "auto"
         Size the global step aims for when it downsamples; see
-        :func:`~o3d_rpointhop.registration.settings.resolve_global_points`.
+        :func:`~o3d_rpointhop.registration.defaults.resolve_global_points`.
     seed : int
-        Seeds every random choice (Open3D's RANSAC and FGR).
+        Seeds every random choice (RANSAC, FGR, consensus).
     descriptor : transformer or None
         Descriptor used by global steps that do not name their own.
+    check : bool, default=True
+        Refuse clouds without extent or on one line, and warn about planar ones
+        (:func:`~o3d_rpointhop.registration.quality.check_geometry`).
     settings : RegistrationSettings or None
         The multiples of the resolution; ``None`` is ``RegistrationSettings()``.
+    global_clouds : (array-like, array-like), default=None
+        The clouds the global step works on, already prepared (in the caller's
+        coordinates, like ``source`` and ``target``), instead of voxel-downsampling
+        ``source`` and ``target``: a caller that registers one scan to many prepares it
+        once.
+    features : (array-like, array-like), default=None
+        ``descriptor``'s descriptors of the global clouds (source, target), one row per
+        point, computed once by the caller. Needs ``descriptor``.
 
     Attributes
     ----------
@@ -122,7 +66,8 @@ class RegistrationContext:
     n_global_points : int
         The size the global step aims for, resolved.
     downsampled : bool
-        Whether the global step works on voxel-downsampled clouds.
+        Whether the global step works on other clouds than the full ones (downsampled,
+        or given as ``global_clouds``).
     origin : ndarray of shape (3,)
         The caller's coordinates of the centred frame's origin (the target's centroid);
         ``source`` and ``target`` are in the centred frame.
@@ -138,6 +83,9 @@ class RegistrationContext:
         descriptor: Any = None,
         check: bool = True,
         settings: RegistrationSettings | None = None,
+        *,
+        global_clouds: tuple[Any, Any] | None = None,
+        features: tuple[Any, Any] | None = None,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
@@ -148,16 +96,34 @@ class RegistrationContext:
             check_geometry(np.asarray(self.source.points), "source", source)
             check_geometry(np.asarray(self.target.points), "target", target)
         self.n_global_points = resolve_global_points(n_global_points, descriptor)
-        voxel, self.downsampled = resolve_voxel_size(
-            self.source, self.target, voxel_size, self.n_global_points
-        )
-        if settings is not None and not isinstance(settings, RegistrationSettings):
-            raise ValueError(f"settings must be a RegistrationSettings, got {settings!r}")
+        self._global: dict[str, o3d.geometry.PointCloud] = {}
+        if global_clouds is None:
+            voxel, self.downsampled = resolve_voxel_size(
+                self.source, self.target, voxel_size, self.n_global_points
+            )
+        else:
+            for which, cloud in zip(("source", "target"), global_clouds, strict=True):
+                self._global[which] = to_point_cloud(cloud, f"global {which}").translate(
+                    -self.origin
+                )
+            voxel, self.downsampled = voxel_size, True
+            if voxel == "auto":
+                voxel = max(point_spacing(np.asarray(c.points)) for c in self._global.values())
         self.settings = (settings or RegistrationSettings()).at(voxel)
         self.seed = int(seed)
         self.descriptor = descriptor
-        self._global: dict[str, o3d.geometry.PointCloud] = {}
         self._features: dict[tuple[int, str], np.ndarray] = {}
+        if features is not None:
+            if descriptor is None:
+                raise ValueError("features need the descriptor that computed them")
+            for which, values in zip(("source", "target"), features, strict=True):
+                values = np.asarray(values)
+                if len(values) != len(self.global_cloud(which).points):
+                    raise ValueError(
+                        f"{which} features have {len(values)} rows for "
+                        f"{len(self.global_cloud(which).points)} global points"
+                    )
+                self._features[(id(descriptor), which)] = values
         self._normals: dict[tuple, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
 
@@ -241,6 +207,22 @@ class RegistrationContext:
             copy.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
             self._normals[key] = copy
         return self._normals[key]
+
+    def evaluate(
+        self, transformation: np.ndarray, max_correspondence_distance: float, which: str = "full"
+    ) -> StepResult:
+        """Fitness, inlier RMSE and inlier pairs of ``transformation`` (centred frame)
+        within ``max_correspondence_distance``, on the full-resolution clouds
+        (``which="full"``) or the global step's (``"global"``)."""
+        if which == "full":
+            source, target = self.source, self.target
+        else:
+            source, target = self.global_cloud("source"), self.global_cloud("target")
+        distance = max_correspondence_distance
+        with repeatable_open3d():
+            result = reg.evaluate_registration(source, target, distance, transformation)
+        info = {"max_correspondence_distance": distance}
+        return StepResult.from_open3d("evaluation", result, 0.0, info, distance)
 
 
 def global_points(points: Any, n_global_points: int = DEFAULT_GLOBAL_POINTS) -> np.ndarray:

@@ -21,15 +21,16 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
-from .._neighbors import point_spacing
-from .._validation import as_points
-from ..batch import _single_threaded, parallel_map
-from ..correspondences import find_correspondences
-from ._ransac import ransac
-from .icp import PointToPlaneICP
-from .pipeline import MAX_SPREAD
-from .settings import DEFAULT_GLOBAL_POINTS, RegistrationSettings
-from .steps import repeatable_open3d
+from .._utils.geometry import point_spacing
+from .._utils.parallel import parallel_map, single_threaded
+from .._utils.threads import repeatable_open3d
+from .._utils.validation import as_points
+from .correspondences import find_correspondences
+from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor
+from .quality import MAX_SPREAD
+from .settings import RegistrationSettings
+from .steps._ransac import ransac
+from .steps.icp import PointToPlaneICP
 
 __all__ = ["MultiwayResult", "register_multiway"]
 
@@ -314,8 +315,6 @@ def register_multiway(
     ValueError
         For fewer than two clouds, or a cloud that is not a valid point cloud.
     """
-    from ..rpointhop import default_descriptor
-
     start = time.perf_counter()
     if not isinstance(clouds, (list, tuple)) or len(clouds) < 2:
         raise ValueError(
@@ -325,26 +324,41 @@ def register_multiway(
     if not 0.0 < min_fitness <= 1.0:
         raise ValueError(f"min_fitness must be in (0, 1], got {min_fitness!r}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
-    worker = _single_threaded(descriptor if descriptor is not None else default_descriptor())
+    worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
     voxel = _common_voxel(points, n_global_points)
     if settings is not None and not isinstance(settings, RegistrationSettings):
         raise ValueError(f"settings must be a RegistrationSettings, got {settings!r}")
     settings = (settings or RegistrationSettings()).at(voxel)
     prepared = parallel_map(
-        _prepare, [(p, voxel, worker) for p in points], n_jobs=n_jobs, progress=progress,
-        desc="describe", unit="scan",
-    )  # fmt: skip
+        _prepare,
+        [(p, voxel, worker) for p in points],
+        n_jobs=n_jobs,
+        progress=progress,
+        desc="describe",
+        unit="scan",
+    )
     features = [f for _, f in prepared]
     candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
     results = parallel_map(
         _register_pair,
         [
-            (points[j], points[i], prepared[j][0], prepared[i][0], features[j], features[i],
-             settings, seed)
+            (
+                points[j],
+                points[i],
+                prepared[j][0],
+                prepared[i][0],
+                features[j],
+                features[i],
+                settings,
+                seed,
+            )
             for i, j in candidates
         ],
-        n_jobs=n_jobs, progress=progress, desc="pairs", unit="pair",
-    )  # fmt: skip
+        n_jobs=n_jobs,
+        progress=progress,
+        desc="pairs",
+        unit="pair",
+    )
     pairs = {pair: (t, f) for pair, (t, f, _) in zip(candidates, results, strict=True)}
     edges = {
         pair: result

@@ -4,31 +4,40 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
 from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
 from sklearn.base import clone
-from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils._param_validation import (
+    HasMethods,
+    Interval,
+    InvalidParameterError,
+    StrOptions,
+    validate_params,
+)
 from sklearn.utils.metaestimators import _BaseComposition
 from sklearn.utils.validation import check_is_fitted
 
-from .context import RegistrationContext, RegistrationWarning
-from .global_estimators import FGRGlobal, RANSACGlobal, SVDGlobal
-from .icp import GeneralizedICP, MultiScaleICP, PointToPlaneICP, PointToPointICP
+from .context import RegistrationContext
+from .defaults import default_descriptor
+from .quality import RegistrationWarning, assess, warn_flags
+from .result import RegistrationResult
 from .scoring import check_pairs, registration_scorer
 from .settings import RegistrationSettings
-from .steps import RegistrationStep, StepResult, evaluate
-from .symmetry import SymmetryCheck, twin_transformations
+from .steps import (
+    FGRGlobal,
+    GeneralizedICP,
+    MultiScaleICP,
+    PointToPlaneICP,
+    PointToPointICP,
+    RANSACGlobal,
+    RegistrationStep,
+    SVDGlobal,
+    SymmetryCheck,
+)
 
-__all__ = [
-    "RegistrationResult",
-    "RegistrationPipeline",
-    "register",
-    "GLOBAL_METHODS",
-    "REFINE_METHODS",
-]
+__all__ = ["RegistrationPipeline", "register", "GLOBAL_METHODS", "REFINE_METHODS"]
 
 GLOBAL_METHODS = {"ransac": RANSACGlobal, "fgr": FGRGlobal, "svd": SVDGlobal}
 REFINE_METHODS = {
@@ -38,91 +47,6 @@ REFINE_METHODS = {
     "multiscale": MultiScaleICP,
     "symmetry_check": SymmetryCheck,
 }
-
-
-@dataclass
-class RegistrationResult:
-    """The outcome of a registration.
-
-    Attributes
-    ----------
-    transformation : ndarray of shape (4, 4)
-        Maps source points into the target frame: ``target ~ source @ R.T + t``, as in
-        Open3D.
-    fitness : float
-        Open3D's fitness: the share of the (full-resolution) source points that have a
-        target point within ``distance`` (the last step's correspondence distance)
-        after the transformation. The last step reports the same number when it ran on
-        the full clouds; every step's own numbers are in ``steps``.
-    inlier_rmse : float
-        RMS distance of those inliers.
-    correspondence_set : ndarray of shape (m, 2)
-        Those inlier pairs ``(source index, target index)``, as in Open3D.
-    steps : list of StepResult
-        Every step's transformation, fitness, inliers and timing, in order.
-    voxel_size : float
-        The resolution the thresholds were derived from.
-    seconds : float
-        Wall time of the whole registration.
-    distance : float
-        The correspondence distance ``fitness`` was measured at.
-    converged : bool
-        False when fewer than 2 % of the source points found a partner (``fitness <
-        0.02``), or when, measured within three times the resolution, the partners' RMS
-        distance exceeds 0.47 of it: distances spread over the whole threshold are the
-        mark of a chance alignment. Measured on training data: unrelated objects
-        registered to each other 0.53-0.58; true poses of two different samples of an
-        object, whole or cropped, 0.24-0.40. Wrong poses that align a scene's floors and
-        walls can fit like right ones and are not always caught: the flag says "surely
-        unreliable", not "surely right".
-    ambiguous : bool
-        True when the result turned by 180 degrees about one of the aligned source's
-        principal axes fits about as well (fitness within three resolutions at least
-        90 % of the result's, on the global clouds; the twins are not refined, so they
-        are judged at that wider distance): a symmetric shape, or a featureless plane,
-        whose pose the data cannot decide. A :class:`RegistrationWarning` is issued
-        with either flag.
-    """
-
-    transformation: np.ndarray
-    fitness: float
-    inlier_rmse: float
-    correspondence_set: np.ndarray
-    steps: list[StepResult] = field(default_factory=list)
-    voxel_size: float = 0.0
-    seconds: float = 0.0
-    distance: float = 0.0
-    converged: bool = True
-    ambiguous: bool = False
-
-    def to_open3d(self):
-        """This result as an ``open3d.pipelines.registration.RegistrationResult``
-        (transformation, fitness, inlier RMSE and correspondence set)."""
-        import open3d as o3d
-
-        out = o3d.pipelines.registration.RegistrationResult()
-        out.transformation = np.asarray(self.transformation, dtype=np.float64)
-        out.fitness = float(self.fitness)
-        out.inlier_rmse = float(self.inlier_rmse)
-        out.correspondence_set = o3d.utility.Vector2iVector(
-            np.asarray(self.correspondence_set, dtype=np.int32).reshape(-1, 2)
-        )
-        return out
-
-    def as_dict(self) -> dict:
-        """JSON-ready summary (the CLI's ``--json`` output)."""
-        return {
-            "transformation": self.transformation.tolist(),
-            "fitness": self.fitness,
-            "inlier_rmse": self.inlier_rmse,
-            "n_correspondences": int(len(self.correspondence_set)),
-            "voxel_size": self.voxel_size,
-            "distance": self.distance,
-            "converged": self.converged,
-            "ambiguous": self.ambiguous,
-            "seconds": self.seconds,
-            "steps": [s.as_dict() for s in self.steps],
-        }
 
 
 def _check_steps(steps: Any) -> list[tuple[str, RegistrationStep]]:
@@ -234,8 +158,15 @@ class RegistrationPipeline(_BaseComposition):
         return self
 
     def _check(self) -> list[tuple[str, RegistrationStep]]:
+        """Validate the pipeline and every step, once per public call."""
         self._validate_params()
-        return _check_steps(self.steps)
+        steps = _check_steps(self.steps)
+        for name, step in steps:
+            try:
+                step._validate_all()
+            except InvalidParameterError as exc:  # say which step, whoever called
+                raise ValueError(f"step {name!r}: {exc}") from None
+        return steps
 
     def fit(self, X: Any, y: Any = None) -> RegistrationPipeline:
         """Fit a clone of the descriptor on the clouds of the pairs ``X``.
@@ -254,8 +185,6 @@ class RegistrationPipeline(_BaseComposition):
         self._check()
         pairs = check_pairs(X)
         if self.descriptor is None:
-            from ..rpointhop import default_descriptor
-
             self.descriptor_ = default_descriptor()
         else:
             clouds = [cloud for pair in pairs for cloud in pair]
@@ -278,9 +207,10 @@ class RegistrationPipeline(_BaseComposition):
 
     def register_pairs(self, X: Any) -> list[RegistrationResult]:
         """:meth:`register` for every ``(source, target)`` pair of ``X``, in order."""
+        steps = self._check()
         with warnings.catch_warnings():  # the flags are on the results
             warnings.simplefilter("ignore", RegistrationWarning)
-            return [self.register(source, target) for source, target in check_pairs(X)]
+            return [self._register(steps, s, t, None) for s, t in check_pairs(X)]
 
     def score(self, X: Any, y: Any) -> float:
         """Registration recall: the share of pairs registered within 5 deg and two
@@ -314,7 +244,9 @@ class RegistrationPipeline(_BaseComposition):
         -------
         RegistrationResult
         """
-        steps = self._check()
+        return self._register(self._check(), source, target, init)
+
+    def _register(self, steps, source, target, init, stacklevel: int = 4) -> RegistrationResult:
         start = time.perf_counter()
         context = RegistrationContext(
             source,
@@ -325,10 +257,42 @@ class RegistrationPipeline(_BaseComposition):
             descriptor=getattr(self, "descriptor_", self.descriptor),
             settings=self.settings,
         )
+        return self._run(steps, context, init, start, True, stacklevel)
+
+    def run(
+        self,
+        context: RegistrationContext,
+        init: np.ndarray | None = None,
+        *,
+        assess_ambiguity: bool = True,
+    ) -> RegistrationResult:
+        """Align the clouds of a prepared :class:`RegistrationContext`: the form for a
+        caller that prepares clouds once and registers them many times (global clouds
+        and descriptors computed once per scan, as :func:`register_multiway` does). The
+        pipeline's ``voxel_size``, ``n_global_points``, ``seed``, ``descriptor`` and
+        ``settings`` are the context's own then.
+
+        Parameters
+        ----------
+        context : RegistrationContext
+        init : ndarray of shape (4, 4), default=None
+            As in :meth:`register`, in the caller's coordinates.
+        assess_ambiguity : bool, default=True
+            Measure ``result.ambiguous`` (three more evaluations on the global clouds).
+
+        Returns
+        -------
+        RegistrationResult
+        """
+        steps = self._check()
+        return self._run(steps, context, init, time.perf_counter(), assess_ambiguity, 3)
+
+    def _run(self, steps, context, init, start, ambiguity, stacklevel) -> RegistrationResult:
+        """Every step in order on ``context``, then the result's flags."""
         current = np.eye(4) if init is None else context.to_local(_check_transformation(init))
         results = []
         for name, step in steps:
-            outcome = step.run(context, current)
+            outcome = step._run_timed(context, current)
             outcome.name = name
             if not np.isfinite(outcome.transformation).all():
                 raise ValueError(
@@ -340,60 +304,20 @@ class RegistrationPipeline(_BaseComposition):
             outcome.transformation = context.to_world(current)
             results.append(outcome)
         distance = results[-1].distance
-        final = evaluate(context, current, distance)
-        wide = max(distance, context.settings.spread_distance)
-        spread = evaluate(context, current, wide).inlier_rmse / wide
-        converged = final.fitness >= MIN_FITNESS and spread <= MAX_SPREAD
-        ambiguous = converged and _ambiguous(context, current, wide)
-        if not converged:
-            warnings.warn(
-                f"the registration did not converge: {final.fitness:.1%} of the source "
-                f"points have a target point within {distance:.4g}, and within {wide:.4g} "
-                f"their RMS distance is {spread:.2f} of it (no overlap, or a chance "
-                "alignment); result.converged is False",
-                RegistrationWarning,
-                stacklevel=3,
-            )
-        elif ambiguous:
-            warnings.warn(
-                "the registration is ambiguous: the result turned by 180 degrees fits about "
-                "as well (a symmetric shape or a featureless plane); result.ambiguous is True",
-                RegistrationWarning,
-                stacklevel=3,
-            )
+        quality = assess(context, current, distance, ambiguity)
+        warn_flags(quality, distance, stacklevel)
         return RegistrationResult(
             transformation=context.to_world(current),
-            fitness=final.fitness,
-            inlier_rmse=final.inlier_rmse,
-            correspondence_set=final.correspondence_set,
+            fitness=quality.final.fitness,
+            inlier_rmse=quality.final.inlier_rmse,
+            correspondence_set=quality.final.correspondence_set,
             steps=results,
             voxel_size=context.voxel_size,
             seconds=time.perf_counter() - start,
             distance=distance,
-            converged=converged,
-            ambiguous=ambiguous,
+            converged=quality.converged,
+            ambiguous=quality.ambiguous,
         )
-
-
-#: Fitness below which a result is flagged as not converged.
-MIN_FITNESS = 0.02
-#: Inlier RMSE within the settings' ``spread_distance`` (3 resolutions), as a share of
-#: that distance, above which a result is flagged as not converged (a chance alignment).
-MAX_SPREAD = 0.47
-#: A 180-degree twin with at least this share of the result's fitness makes it ambiguous.
-AMBIGUITY_RATIO = 0.9
-
-
-def _ambiguous(context: RegistrationContext, transformation: np.ndarray, distance: float) -> bool:
-    """Whether a 180-degree twin of ``transformation`` fits about as well, measured on
-    the global clouds (cheap: about ``n_global_points`` points)."""
-    source = np.asarray(context.global_cloud("source").points)
-    base = evaluate(context, transformation, distance, which="global").fitness
-    if base <= 0.0:
-        return False
-    twins = twin_transformations(source, transformation)
-    best = max(evaluate(context, t, distance, which="global").fitness for t in twins)
-    return best >= AMBIGUITY_RATIO * base
 
 
 def _check_transformation(value: Any) -> np.ndarray:
@@ -406,16 +330,38 @@ def _check_transformation(value: Any) -> np.ndarray:
     return arr
 
 
-def _make_step(spec: Any, table: dict, what: str, descriptor: Any = None):
-    if isinstance(spec, RegistrationStep):
-        return spec
-    if isinstance(spec, str) and spec in table:
-        return table[spec]()
-    raise ValueError(
-        f"{what} must be one of {sorted(table)}, None or a RegistrationStep, got {spec!r}"
-    )
+def _make_step(spec: str | RegistrationStep, table: dict) -> RegistrationStep:
+    """A step given by name (checked against ``table``) or as a step object."""
+    return spec if isinstance(spec, RegistrationStep) else table[spec]()
 
 
+def _check_refinements(refine: Any) -> list:
+    """``refine`` as a list of names (of :data:`REFINE_METHODS`) and steps."""
+    items = list(refine) if isinstance(refine, (list, tuple)) else [refine]
+    items = [r for r in items if r is not None and r != "none"]
+    for item in items:
+        if not (isinstance(item, RegistrationStep) or item in REFINE_METHODS):
+            raise ValueError(
+                f"refine must hold names of {sorted(REFINE_METHODS)}, None or "
+                f"RegistrationStep objects, got {item!r}"
+            )
+    return items
+
+
+@validate_params(
+    {
+        "source": "no_validation",
+        "target": "no_validation",
+        "global_method": [StrOptions(set(GLOBAL_METHODS)), RegistrationStep, None],
+        "refine": [StrOptions({*REFINE_METHODS, "none"}), RegistrationStep, list, tuple, None],
+        "init": ["array-like", None],
+        **{
+            name: RegistrationPipeline._parameter_constraints[name]
+            for name in ("descriptor", "voxel_size", "n_global_points", "seed", "settings")
+        },
+    },
+    prefer_skip_nested_validation=False,  # steps given as objects are checked by the pipeline
+)
 def register(
     source: Any,
     target: Any,
@@ -478,15 +424,14 @@ def register(
     """
     steps: list[tuple[str, RegistrationStep]] = []
     if global_method is not None:
-        steps.append(("global", _make_step(global_method, GLOBAL_METHODS, "global_method")))
-    refinements = refine if isinstance(refine, (list, tuple)) else [refine]
+        steps.append(("global", _make_step(global_method, GLOBAL_METHODS)))
     previous = None
-    for i, spec in enumerate(r for r in refinements if r is not None and r != "none"):
+    for i, spec in enumerate(_check_refinements(refine)):
         if spec == "symmetry_check":  # twins are refined like the estimate was
             step = SymmetryCheck(refine=None if previous is None else clone(previous))
             steps.append(("symmetry_check", step))
             continue
-        previous = _make_step(spec, REFINE_METHODS, "refine")
+        previous = _make_step(spec, REFINE_METHODS)
         steps.append((f"refine{i}" if i else "refine", previous))
     if not steps:
         raise ValueError("nothing to do: global_method and refine are both None")
@@ -498,4 +443,5 @@ def register(
         seed=seed,
         settings=settings,
     )
-    return pipeline.register(source, target, init=init)
+    # The warnings of a flagged result point at register()'s caller.
+    return pipeline._register(pipeline._check(), source, target, init, stacklevel=5)

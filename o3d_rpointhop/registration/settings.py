@@ -19,17 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from .._neighbors import point_spacing
+from .._utils.geometry import point_spacing
+from ..descriptors import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR
 
-__all__ = [
-    "DEFAULT_GLOBAL_POINTS",
-    "RegistrationSettings",
-    "resolve_global_points",
-    "resolve_voxel_size",
-]
-
-#: Size of the global step's clouds when neither the call nor the descriptor names one.
-DEFAULT_GLOBAL_POINTS = 2048
+__all__ = ["RegistrationSettings", "resolve_voxel_size"]
 
 # Small clouds whose point spacings differ by more than this factor are downsampled.
 _DENSITY_RATIO = 0.5
@@ -87,8 +80,8 @@ class RegistrationSettings:
     fgr_factor: float = 1.0
     evaluation_factor: float = 1.0
     icp_factors: tuple[float, ...] = (2.0, 0.5)
-    normal_radius_factor: float = 2.0
-    feature_radius_factor: float = 5.0
+    normal_radius_factor: float = NORMAL_RADIUS_FACTOR
+    feature_radius_factor: float = FEATURE_RADIUS_FACTOR
     symmetry_factor: float = 2.0
     spread_factor: float = 3.0
     edge_factor: float = 1.5
@@ -164,36 +157,6 @@ def _positive(value: Any) -> bool:
         and bool(np.isfinite(value))
         and value > 0
     )
-
-
-def resolve_global_points(n_global_points: int | str, descriptor: Any = None) -> int:
-    """The number of points the global step downsamples each cloud to.
-
-    Parameters
-    ----------
-    n_global_points : int or "auto"
-        An int is used as given. ``"auto"``: the descriptor's ``registration_points_``
-        when it has one (a model states the cloud size it was made for: the shipped
-        scene model says 4096, chosen on its training scenes), else
-        :data:`DEFAULT_GLOBAL_POINTS`.
-    descriptor : transformer or None
-
-    Returns
-    -------
-    int
-    """
-    if n_global_points == "auto":
-        hint = getattr(descriptor, "registration_points_", None)
-        return DEFAULT_GLOBAL_POINTS if hint is None else int(hint)
-    if (
-        not isinstance(n_global_points, numbers.Integral)
-        or isinstance(n_global_points, bool)
-        or n_global_points < 3
-    ):
-        raise ValueError(
-            f"n_global_points must be 'auto' or an int of at least 3, got {n_global_points!r}"
-        )
-    return int(n_global_points)
 
 
 def resolve_voxel_size(source, target, voxel_size: float | str, n_global_points: int):

@@ -1,0 +1,24 @@
+"""Small geometry helpers shared by the descriptors and the registration."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+
+__all__ = ["point_spacing"]
+
+
+def point_spacing(points: np.ndarray) -> float:
+    """Median distance from a point to its nearest neighbour (coincident points left out).
+
+    Raises
+    ------
+    ValueError
+        If every point coincides.
+    """
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    dist = np.asarray(cloud.compute_nearest_neighbor_distance())
+    positive = dist[dist > 0]
+    if positive.size == 0:
+        raise ValueError("the cloud has no spatial extent: all its points coincide")
+    return float(np.median(positive))

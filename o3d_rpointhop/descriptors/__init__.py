@@ -1,0 +1,23 @@
+"""Point descriptors behind one scikit-learn interface: :class:`RPointHopTransformer`
+(learned, rotation-invariant) and :class:`FPFHTransformer` (Open3D's FPFH).
+
+Private modules, in the manner of ``sklearn.decomposition``: :mod:`._base` (what both
+share), :mod:`._rpointhop` and :mod:`._fpfh` (the estimators), :mod:`._pretrained` (the
+shipped models), :mod:`._persistence` (the model file format) and the subpackage
+:mod:`.pointhop` (the R-PointHop maths, free of scikit-learn).
+"""
+
+from ._base import BaseDescriptor
+from ._fpfh import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR, FPFHTransformer
+from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS
+from ._rpointhop import RPointHopTransformer
+
+__all__ = [
+    "BaseDescriptor",
+    "FEATURE_RADIUS_FACTOR",
+    "FPFHTransformer",
+    "NORMAL_RADIUS_FACTOR",
+    "PRETRAINED_COMPONENTS",
+    "PRETRAINED_MODELS",
+    "RPointHopTransformer",
+]

@@ -1,0 +1,73 @@
+"""What both descriptors share: the transform over one or many clouds, the output
+width and the scikit-learn tags (in the manner of scikit-learn's ``_BasePCA``)."""
+
+from __future__ import annotations
+
+from abc import ABCMeta, abstractmethod
+from typing import Any
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassNamePrefixFeaturesOutMixin, TransformerMixin
+
+from .._utils.parallel import map_clouds
+from .._utils.validation import as_cloud_list
+
+__all__ = ["BaseDescriptor"]
+
+
+class BaseDescriptor(
+    ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstimator, metaclass=ABCMeta
+):
+    """Base class of the point descriptors: one row per input point, in input order.
+
+    Subclasses implement :meth:`_check_transform` (validate the parameters, once per
+    call, and return what the call needs of them), :meth:`_per_cloud` (check the clouds
+    and return the per-cloud arguments of :meth:`_describe`) and :meth:`_describe` (the
+    descriptors of one validated cloud). The input forms, the parallel map over clouds
+    and the form of the answer are handled here once.
+    """
+
+    @abstractmethod
+    def _check_transform(self) -> Any:
+        """Validate the parameters (and the fitted state) before any work; return the
+        checked settings :meth:`_per_cloud` needs."""
+
+    @abstractmethod
+    def _per_cloud(self, X: Any, clouds: list[np.ndarray], kind: str, settings: Any) -> list:
+        """Check the clouds; return one list of per-cloud arguments of :meth:`_describe`
+        per extra argument it takes."""
+
+    @abstractmethod
+    def _describe(self, points: np.ndarray, *extras: Any) -> np.ndarray:
+        """Descriptors ``(n_points, n_features_out_)`` of one validated cloud."""
+
+    def transform(self, X: Any) -> np.ndarray | list[np.ndarray]:
+        """Describe every point of one or several clouds.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_points, 3) or (n_clouds, n_points, 3), \
+                open3d.geometry.PointCloud, or list of those
+            Clouds of any size, in any position and metric scale.
+
+        Returns
+        -------
+        descriptors : ndarray of shape (n_points, n_features_out_), or a list of such
+            arrays for a list input, or an ndarray of shape
+            (n_clouds, n_points, n_features_out_) for a 3-D array input. Row ``i``
+            describes input point ``i``. Several clouds are described as ``n_jobs``
+            parallel joblib tasks.
+        """
+        settings = self._check_transform()
+        clouds, kind = as_cloud_list(X)
+        extras = self._per_cloud(X, clouds, kind, settings)
+        return map_clouds(self._describe, clouds, kind, self.n_jobs, *extras)
+
+    @property
+    def _n_features_out(self) -> int:
+        return self.n_features_out_
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.three_d_array = True
+        return tags

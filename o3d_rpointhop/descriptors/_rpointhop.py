@@ -1,0 +1,392 @@
+"""The R-PointHop feature learner as a scikit-learn transformer: parameters, fit,
+transform, save and load around the hop maths of :mod:`.pointhop`."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from numbers import Integral, Real
+from os import PathLike
+from typing import Any
+
+import numpy as np
+from joblib import effective_n_jobs
+from sklearn.base import _fit_context
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
+
+from .._utils.validation import as_cloud_list
+from ._base import BaseDescriptor
+from ._persistence import load_model, save_model
+from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS, pretrained_path
+from .pointhop import SAMPLING_METHODS, HopConfig, HopTree
+
+__all__ = ["RPointHopTransformer"]
+
+
+class RPointHopTransformer(BaseDescriptor):
+    """Unsupervised, rotation- and translation-invariant point descriptors (R-PointHop).
+
+    R-PointHop (Kadam et al., IEEE TIP 2022) learns a multi-hop descriptor without
+    labels. Each point gets a local reference frame (LRF) from the PCA of its nearest
+    neighbours. Hop 1 takes the eight octant means of the neighbours' LRF coordinates
+    (24 numbers) through a Saab transform (a DC kernel and PCA "AC" kernels; outputs are
+    centred rather than biased, which only shifts every descriptor by one constant).
+    Every later hop samples the cloud down by farthest point sampling, pools each
+    surviving channel of the previous hop over the eight LRF octants of a larger
+    neighbourhood and applies a channel-wise Saab transform. Channels whose energy falls
+    below ``energy_threshold`` are dropped. The descriptor of a point is the output of the
+    last hop, evaluated with every input point as a query, so ``transform`` returns one
+    row per input point, in input order.
+
+    Parameters
+    ----------
+    n_neighbors : sequence of int, default=(64, 32, 48, 48)
+        Neighbourhood size of each hop; its length is the number of hops.
+    hop_sizes : sequence of float or int, default=(1.0, 0.75, 0.5, 0.375)
+        Size of each hop's farthest point sample: a float in (0, 1] is a fraction of the
+        cloud, an int a number of points (at most the cloud's size). Must not increase.
+        The defaults are the paper's 1024/768/512/384 points for a 1024-point cloud and
+        scale with the cloud. The last size only sets which points train the last hop:
+        when transforming, the last hop is evaluated at every input point.
+    lrf_neighbors : int, default=64
+        Number of nearest points (the point itself included) whose PCA gives the LRF
+        (the paper's scene variant: 256).
+    attributes : tuple of str, default=("xyz",)
+        What hop 1 pools over the eight LRF octants of each neighbourhood: ``"xyz"``,
+        the neighbours' LRF coordinates (the object variant), and optionally
+        ``"normal"``, their normals expressed in the point's LRF, and ``"eigen"``, seven
+        features of their covariance eigenvalues (linearity, planarity, scattering,
+        omnivariance, anisotropy, eigenentropy, change of curvature): the paper's scene
+        variant. Every attribute is rigid-invariant and finite on planes and edges; see
+        ``o3d_rpointhop.descriptors.pointhop._attributes``.
+    energy_threshold : float, default=0.001
+        Channels whose energy (share of the variance, multiplied down the tree) is below
+        this are not passed to the next hop. The last hop keeps all outputs of the
+        channels it receives, as the authors' model does.
+    scale : "auto" or float, default="auto"
+        Length that hop-1 coordinates are divided by. ``"auto"`` uses each cloud's median
+        distance between a point and its LRF neighbours, which makes descriptors
+        independent of the unit and of uniform scaling (a unit-sphere object and a scan
+        in metres are treated alike, as long as their point spacing is similar relative
+        to their shape). A float fixes the unit, as the paper does (objects in the unit
+        sphere).
+    fit_subsample : int, default=None
+        If set, ``fit`` draws at most this many points of each training cloud at random
+        (e.g. 1024 of ModelNet40's 2048, as in the paper). ``transform`` never subsamples.
+    sampling : {"auto", "fps", "poisson"}, default="auto"
+        How each hop's sample is drawn. ``"fps"``: farthest point sampling from the
+        point farthest from the centroid (the paper's choice; its cost grows with the
+        square of the cloud). ``"poisson"``: a rigid-invariant Poisson-disk subsample
+        in ``O(n log n)`` (see ``docs/algorithm.md``). ``"auto"``: FPS up to 16384
+        points, Poisson disks above.
+    n_components : int, default=None
+        If set, descriptors are projected on their ``n_components`` principal axes,
+        learned by ``fit`` from the training descriptors (a PCA without whitening
+        folded into the last hop): a short descriptor that Open3D's k-d tree matches
+        fast and that keeps a million-point cloud's descriptors small. A model fitted
+        with ``n_components=K`` also serves any smaller value set later.
+    progress : bool, default=None
+        Show a progress bar on stderr (``tqdm``) for long fits and transforms. ``None``:
+        only when stderr is a terminal and the job is large.
+    n_jobs : int, default=None
+        Parallel workers: processes over clouds (``fit``, and ``transform`` of several
+        clouds), threads over blocks of points when transforming one cloud. ``None``
+        means 1 and ``-1`` all cores. Honoured by joblib's ``parallel_config``, so a
+        Dask cluster can run it.
+    random_state : int, RandomState instance or None, default=None
+        Seeds ``fit_subsample``. Everything else is deterministic: sampling depends on
+        the geometry only, so it moves with the cloud.
+
+    Attributes
+    ----------
+    n_features_in_ : int
+        Always 3 (x, y, z).
+    n_features_out_ : int
+        Length of a descriptor: ``n_components`` if set, else every output of the last
+        hop.
+    kernels_ : list of ndarray of shape (n_channels, dim, dim)
+        Saab kernels of each hop (hop 1: one channel, 8 octants x the attribute
+        channels: 24-D for ``"xyz"``, 104-D with normals and eigen features; later hops:
+        one 8-D channel per channel passed on). Column 0 is the DC kernel.
+    means_ : list of ndarray of shape (n_channels, dim)
+        Training mean of every Saab output of each hop, subtracted so that features are
+        centred. (The paper instead adds a bias that makes them non-negative; both only
+        shift every descriptor by one constant vector; see
+        ``o3d_rpointhop.descriptors.pointhop._saab``.)
+    energies_ : list of ndarray of shape (n_channels, dim)
+        Energy of every output node of each hop (normalised variance times the parent's
+        energy).
+    selected_ : list of ndarray of int
+        Indices into each hop's flattened ``(n_channels * dim)`` outputs of the nodes passed
+        to the next hop, or, for the last hop, of the descriptor's components.
+    n_training_clouds_ : int
+        Number of clouds the model was fitted on.
+    components_ : ndarray of shape (n_fitted_components, n_full_features) or None
+        Principal axes of the training descriptors (``None`` if fitted without
+        ``n_components``), by decreasing variance.
+    explained_variance_ : ndarray of shape (n_fitted_components,) or None
+        Variance of the training descriptors along each axis.
+    pca_mean_ : ndarray of shape (n_full_features,) or None
+        Mean of the training descriptors, subtracted before projecting.
+    training_scenes_ : list of str
+        Only on scene models: the scene folders the model was fitted on (set by
+        ``scripts/fit_scene_model.py``, stored in the model file).
+    registration_points_ : int
+        Only on models that state it: the size each cloud should be downsampled to
+        when :func:`~o3d_rpointhop.register` describes it (its ``n_global_points="auto"``
+        reads it; the shipped scene model: 4096, chosen on its training scenes). Stored
+        in the model file.
+
+    See Also
+    --------
+    o3d_rpointhop.FPFHTransformer : Open3D's FPFH behind the same interface.
+
+    Notes
+    -----
+    The descriptor is exactly invariant to rotations and translations of the input and
+    equivariant to permutations of its rows, up to floating point rounding, as long as
+    the geometry is generic: PCA axes of a neighbourhood with (near) equal eigenvalues,
+    and points exactly on an octant boundary after rounding, are the known limits of any
+    PCA-based LRF. Such degenerate neighbourhoods still get finite descriptors.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from o3d_rpointhop import RPointHopTransformer
+    >>> rng = np.random.default_rng(0)
+    >>> clouds = [rng.normal(size=(256, 3)) for _ in range(4)]
+    >>> model = RPointHopTransformer().fit(clouds)
+    >>> model.transform(clouds[0]).shape[0]
+    256
+    """
+
+    _parameter_constraints = {
+        "n_neighbors": ["array-like"],
+        "hop_sizes": ["array-like"],
+        "lrf_neighbors": [Interval(Integral, 3, None, closed="left")],
+        "attributes": [tuple, list, str],
+        "energy_threshold": [Interval(Real, 0, 1, closed="left")],
+        "scale": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
+        "fit_subsample": [None, Interval(Integral, 1, None, closed="left")],
+        "sampling": [StrOptions(set(SAMPLING_METHODS))],
+        "n_components": [None, Interval(Integral, 1, None, closed="left")],
+        "progress": [None, "boolean"],
+        "n_jobs": [None, Integral],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(
+        self,
+        n_neighbors: Sequence[int] = (64, 32, 48, 48),
+        *,
+        hop_sizes: Sequence[float | int] = (1.0, 0.75, 0.5, 0.375),
+        lrf_neighbors: int = 64,
+        attributes: Sequence[str] = ("xyz",),
+        energy_threshold: float = 1e-3,
+        scale: str | float = "auto",
+        fit_subsample: int | None = None,
+        sampling: str = "auto",
+        n_components: int | None = None,
+        progress: bool | None = None,
+        n_jobs: int | None = None,
+        random_state: int | np.random.RandomState | None = None,
+    ) -> None:
+        self.n_neighbors = n_neighbors
+        self.hop_sizes = hop_sizes
+        self.lrf_neighbors = lrf_neighbors
+        self.attributes = attributes
+        self.energy_threshold = energy_threshold
+        self.scale = scale
+        self.fit_subsample = fit_subsample
+        self.sampling = sampling
+        self.n_components = n_components
+        self.progress = progress
+        self.n_jobs = n_jobs
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ parameters
+    def _hop_config(self) -> HopConfig:
+        """The hop parameters, with the checks that relate them to each other (one hop
+        size per neighbourhood size, sizes that do not grow); the declarative
+        ``_parameter_constraints`` are checked by the caller."""
+        return HopConfig.from_params(
+            self.n_neighbors,
+            self.hop_sizes,
+            self.lrf_neighbors,
+            self.scale,
+            self.sampling,
+            self.attributes,
+        )
+
+    def _check_sizes(self, clouds: list[np.ndarray], config: HopConfig, kind: str) -> None:
+        for i, cloud in enumerate(clouds):
+            reason = config.shortfall(len(cloud))
+            if reason is not None:
+                name = "X" if kind == "single" else f"X[{i}]"
+                raise ValueError(
+                    f"{name} has {len(cloud)} points, too few: {reason}; these settings need at "
+                    f"least {config.min_points()} points per cloud"
+                )
+
+    # ------------------------------------------------------------------ fitting
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X: Any, y: Any = None) -> RPointHopTransformer:
+        """Learn the Saab kernels of every hop from unlabelled point clouds.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_points, 3) or (n_clouds, n_points, 3), \
+                open3d.geometry.PointCloud, or list of those
+            Training clouds; their sizes may differ.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : RPointHopTransformer
+            The fitted transformer.
+        """
+        config = self._hop_config()
+        clouds, kind = as_cloud_list(X)
+        if self.fit_subsample is not None:
+            rng = check_random_state(self.random_state)
+            clouds = [
+                c[np.sort(rng.choice(len(c), self.fit_subsample, replace=False))]
+                if len(c) > self.fit_subsample
+                else c
+                for c in clouds
+            ]
+        self._check_sizes(clouds, config, kind)
+        tree = HopTree.fit(
+            clouds,
+            config,
+            energy_threshold=self.energy_threshold,
+            n_components=self.n_components,
+            n_jobs=self.n_jobs,
+            progress=self.progress,
+        )
+        self._set_tree(tree)
+        self.n_features_in_ = 3
+        self.n_training_clouds_ = len(clouds)
+        return self
+
+    def _set_tree(self, tree: HopTree) -> None:
+        """Store a fitted hop tree as the estimator's fitted attributes."""
+        self.kernels_, self.means_ = tree.kernels, tree.means
+        self.energies_, self.selected_ = tree.energies, tree.selected
+        self.components_ = tree.components
+        self.explained_variance_ = tree.explained_variance
+        self.pca_mean_ = tree.pca_mean
+
+    def _tree(self) -> HopTree:
+        """The fitted attributes as a :class:`~.pointhop.HopTree` (no copy)."""
+        return HopTree(
+            kernels=self.kernels_,
+            means=self.means_,
+            energies=self.energies_,
+            selected=self.selected_,
+            components=getattr(self, "components_", None),
+            explained_variance=getattr(self, "explained_variance_", None),
+            pca_mean=getattr(self, "pca_mean_", None),
+        )
+
+    @property
+    def n_features_out_(self) -> int:
+        check_is_fitted(self, "kernels_")
+        n_full = int(self.selected_[-1].size)
+        return n_full if self.n_components is None else int(self.n_components)
+
+    def _projection(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(mean, axes.T)`` for the current ``n_components``, or None; a clear error
+        when the model holds fewer axes."""
+        return self._tree().projection(self.n_components)
+
+    # ------------------------------------------------------------------ transform
+    def _check_transform(self) -> HopConfig:
+        check_is_fitted(self, "kernels_")
+        self._validate_params()
+        config = self._hop_config()
+        self._projection()  # n_components against the fitted axes, before any work
+        return config
+
+    def _per_cloud(self, X: Any, clouds: list[np.ndarray], kind: str, config: HopConfig) -> list:
+        self._check_sizes(clouds, config, kind)
+        return [[config] * len(clouds)]
+
+    def _describe(self, points: np.ndarray, config: HopConfig) -> np.ndarray:
+        return self._tree().describe(
+            points,
+            config,
+            n_components=self.n_components,
+            n_threads=max(1, effective_n_jobs(self.n_jobs)),
+            progress=self.progress,
+        )
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.transformer_tags.preserves_dtype = []
+        return tags
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | PathLike) -> None:
+        """Write the fitted model to an ``.npz`` file that loads without pickle.
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination, written exactly (no extension is added).
+        """
+        check_is_fitted(self, "kernels_")
+        save_model(self, path)
+
+    @classmethod
+    def pretrained(
+        cls, name: str = "modelnet40", *, n_components: int | str | None = "default"
+    ) -> RPointHopTransformer:
+        """The model shipped with the package, ready to transform.
+
+        Parameters
+        ----------
+        name : {"modelnet40", "scene"}
+            ``"modelnet40"``: paper object settings, fitted on a ModelNet40 train subset
+            (144 shapes, 1024 random points each); see ``docs/model_card.md``.
+            ``"scene"``: the paper's scene attributes (normals and eigenvalue features),
+            fitted on 3DMatch fragments of four scenes, named in its
+            ``training_scenes_``; made by ``scripts/fit_scene_model.py``.
+        n_components : int, None or "default", default="default"
+            ``None``: the full descriptor (1624-D for ``"modelnet40"``, 880-D for
+            ``"scene"``). An int up to 128: the descriptor's projection on that many
+            principal axes, fitted on the same training data. ``"default"``: the model's
+            own choice (``PRETRAINED_COMPONENTS``): the full paper descriptor for
+            ``"modelnet40"``, the 128 axes every scene result was measured with for
+            ``"scene"``.
+
+        Returns
+        -------
+        RPointHopTransformer
+            A fitted model, loaded without pickle.
+        """
+        if name not in PRETRAINED_MODELS:
+            raise ValueError(
+                f"unknown pretrained model {name!r}; available: {sorted(PRETRAINED_MODELS)}"
+            )
+        if n_components == "default":
+            n_components = PRETRAINED_COMPONENTS[name]
+        with pretrained_path(name) as path:
+            model = cls.load(path)
+        model.set_params(n_components=n_components)
+        model._projection()  # a clear error for more axes than the file holds
+        return model
+
+    @classmethod
+    def load(cls, path: str | PathLike) -> RPointHopTransformer:
+        """Read a model written by :meth:`save`.
+
+        Raises
+        ------
+        ValueError
+            If the file is not an o3d-rpointhop model, was written by a newer format
+            version, or is damaged.
+        """
+        return load_model(cls, path)

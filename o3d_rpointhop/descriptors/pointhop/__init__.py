@@ -1,0 +1,14 @@
+"""The R-PointHop maths, free of scikit-learn: sampling (farthest points, Poisson disks),
+local reference frames, octant pooling, scene attributes, the Saab transform, the
+per-cloud hop geometry and the fitted hop tree (fit / forward / describe).
+
+Modules: :mod:`._neighbors` (k-nearest-neighbour search), :mod:`._sampling`,
+:mod:`._frames`, :mod:`._octants`, :mod:`._attributes`, :mod:`._saab`, :mod:`._config`
+(the hop parameters), :mod:`._geometry` (a cloud's hop structure) and :mod:`._tree`.
+"""
+
+from ._config import SAMPLING_METHODS, HopConfig
+from ._geometry import CloudGeometry, build_geometry
+from ._tree import HopTree
+
+__all__ = ["SAMPLING_METHODS", "CloudGeometry", "HopConfig", "HopTree", "build_geometry"]

@@ -1,0 +1,208 @@
+"""Per-cloud geometry of the R-PointHop hops.
+
+The geometry of a cloud (its local reference frames, hop samples,
+neighbourhoods and octant memberships) does not depend on the learned kernels. It is
+computed once per cloud by :func:`build_geometry` and reduced to
+
+* the hop-1 attributes: octant means of the neighbours' coordinates (24-D), and with
+  the scene variant's ``attributes`` also of their normals and eigenvalue features
+  (:mod:`o3d_rpointhop._attributes`), and
+* for every later hop, an :class:`~o3d_rpointhop._octants.OctantPooling` operator that
+  maps the previous hop's per-point features to the octant means of each query's
+  neighbourhood.
+
+The forward pass through fitted hops (:mod:`._tree`) is then a handful of matrix
+products, used both when fitting (hop by hop over all clouds) and when transforming.
+
+Hop ``h`` (1-based) takes its queries from the sample ``S_h`` and its neighbours from
+``S_{h-1}``, where ``S_0`` is the whole cloud and ``S_h`` is a sample of size
+``hop_sizes[h-1]`` drawn from ``S_{h-1}`` (farthest points for clouds of up to
+:data:`~o3d_rpointhop._sampling.FPS_MAX_POINTS` points, Poisson disks above; see
+:mod:`o3d_rpointhop._sampling`). When transforming, the last hop takes every input point as
+a query, so every point gets a descriptor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._attributes import ATTRIBUTE_CHANNELS, eigen_features
+from ._config import HopConfig
+from ._frames import local_reference_frames, project
+from ._neighbors import NeighborIndex, drop_self
+from ._octants import N_OCTANTS, OctantPooling, octant_index, octant_means
+from ._sampling import hop_subsets
+
+__all__ = ["CloudGeometry", "build_geometry", "cloud_scale"]
+
+#: Points whose neighbourhoods (about 3 kB each in float64) are in memory at once.
+GEOMETRY_CHUNK = 16384
+
+
+@dataclass
+class CloudGeometry:
+    """Kernel-independent structure of one cloud.
+
+    Attributes
+    ----------
+    n_points : int
+    hop1_attributes : ndarray of shape (|S_1|, config.hop1_dim)
+    poolings : list of OctantPooling
+        ``poolings[h - 2]`` maps hop ``h - 1`` features (one column per point of
+        ``S_{h-1}``) to the octant means entering hop ``h``.
+    """
+
+    n_points: int
+    hop1_attributes: np.ndarray
+    poolings: list[OctantPooling]
+
+    @property
+    def nbytes(self) -> int:
+        return self.hop1_attributes.nbytes + sum(p.nbytes for p in self.poolings)
+
+
+def cloud_scale(mean_dist: np.ndarray, scale: str | float) -> float:
+    """The length that hop-1 coordinates are divided by.
+
+    ``"auto"``: the median over points of ``mean_dist``, each point's mean distance to
+    its LRF neighbours, so descriptors do not depend on the unit (metres, millimetres,
+    unit sphere).
+    """
+    if scale != "auto":
+        return float(scale)
+    value = float(np.median(mean_dist))
+    if value <= 0.0:
+        value = float(mean_dist.mean())
+    if value <= 0.0:
+        raise ValueError(
+            "the cloud has no spatial extent: every point coincides with its neighbours"
+        )
+    return value
+
+
+def _rows_in(sorted_ids: np.ndarray, start: int, stop: int) -> tuple[int, int]:
+    """Positions ``lo:hi`` of the ids in ``[start, stop)`` in a sorted id array."""
+    lo, hi = np.searchsorted(sorted_ids, (start, stop))
+    return int(lo), int(hi)
+
+
+def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> CloudGeometry:
+    """Compute the hop structure of one validated cloud, large enough for ``config``
+    (``config.shortfall(len(points))`` is None: the estimator checks it).
+
+    Neighbourhoods are searched and expressed in their frames
+    :data:`GEOMETRY_CHUNK` queries at a time, and only their octants and neighbour rows
+    are kept (5 bytes per neighbour), so memory grows linearly with the cloud.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3), float64
+    config : HopConfig
+    for_fit : bool
+        If True the last hop's queries are its sample (as in training); otherwise they
+        are all ``n`` points (one descriptor per input point).
+    """
+    n = len(points)
+    if not np.any(points != points[0]):
+        raise ValueError("the cloud has no spatial extent: all its points coincide")
+    n_hops = config.n_hops
+    sizes = config.sample_sizes(n)
+    samples = hop_subsets(points, sizes if for_fit else sizes[:-1], config.sampling)
+    everything = np.arange(n, dtype=np.int64)
+    sources = [everything] + samples[: n_hops - 1]
+    queries = samples if for_fit else samples + [everything]
+    # Hops whose neighbours come from the whole cloud share the LRF's search.
+    full = [h for h in range(n_hops) if len(sources[h]) == n]
+    k_lrf = config.lrf_neighbors
+    k_all = max([k_lrf] + [config.n_neighbors[h] + 1 for h in full])
+    octants = [np.empty((len(queries[h]), config.n_neighbors[h]), np.uint8) for h in range(n_hops)]
+    neighbours = [np.empty(o.shape, np.int32) for o in octants]
+    hop1_sums = np.empty((len(queries[0]), 24))
+    frames = np.empty((n, 3, 3))
+    eigenvalues = np.empty((n, 3)) if "eigen" in config.attributes else None
+    mean_dist = np.empty(n)
+    planes = np.ascontiguousarray(points.T)  # (3, n)
+    centroid = points.mean(axis=0)[:, None]
+    index = NeighborIndex(points)
+    for start in range(0, n, GEOMETRY_CHUNK):
+        stop = min(n, start + GEOMETRY_CHUNK)
+        nn_idx, nn_sq = index.query(points[start:stop], k_all)  # column 0: the point itself
+        offsets = np.take(planes, nn_idx, axis=1) - planes[:, start:stop, None]
+        # Every hop expresses its neighbours in these frames. (The paper re-decides the
+        # axis signs on each hop's neighbourhood; keeping the LRF's own signs, as the
+        # authors' code does, is cheaper and matched slightly better on resampled
+        # ModelNet40 pairs.)
+        towards = centroid - planes[:, start:stop]  # each point to the centroid
+        if eigenvalues is None:
+            frames[start:stop], local = local_reference_frames(offsets, k_lrf, towards)
+        else:
+            frames[start:stop], local, eigenvalues[start:stop] = local_reference_frames(
+                offsets, k_lrf, towards, return_eigenvalues=True
+            )
+        mean_dist[start:stop] = np.sqrt(nn_sq[:, 1:k_lrf]).mean(axis=1)
+        for h in full:
+            k = config.n_neighbors[h]
+            lo, hi = _rows_in(queries[h], start, stop)
+            rows = queries[h][lo:hi] - start
+            # Every query belongs to the searched cloud, so its first hit is itself.
+            block = local[:, rows, 1 : k + 1]
+            octants[h][lo:hi] = octant_index(block)
+            neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
+            if h == 0:
+                hop1_sums[lo:hi] = octant_means(block, octants[h][lo:hi])
+        del nn_idx, nn_sq, offsets, local
+    for h in range(n_hops):
+        if h in full:
+            continue
+        k, src, qry = config.n_neighbors[h], sources[h], queries[h]
+        src_index = NeighborIndex(points[src])
+        for lo in range(0, len(qry), GEOMETRY_CHUNK):
+            hi = min(len(qry), lo + GEOMETRY_CHUNK)
+            idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
+            nb = drop_self(idx, sq, k)
+            offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
+            octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
+            neighbours[h][lo:hi] = nb
+    length = cloud_scale(mean_dist, config.scale)
+    hop1 = hop1_sums / length
+    if len(config.attributes) > 1:
+        extra = _neighbour_attributes(
+            config.attributes, queries[0], neighbours[0], octants[0], frames, eigenvalues
+        )
+        hop1 = np.hstack([hop1, extra])
+    poolings = [OctantPooling(octants[h], neighbours[h], len(sources[h])) for h in range(1, n_hops)]
+    return CloudGeometry(n_points=n, hop1_attributes=hop1, poolings=poolings)
+
+
+def _neighbour_attributes(
+    attributes: tuple[str, ...],
+    queries: np.ndarray,
+    neighbours: np.ndarray,
+    octants: np.ndarray,
+    frames: np.ndarray,
+    eigenvalues: np.ndarray | None,
+) -> np.ndarray:
+    """Octant means of the hop-1 neighbours' normals (in each query's frame) and
+    eigenvalue features, after ``"xyz"``, in the order of ``attributes``.
+
+    A second pass over the hop-1 queries, :data:`GEOMETRY_CHUNK` at a time: every
+    neighbour's own frame and eigenvalues are known only once the first pass is done.
+    """
+    features = eigen_features(eigenvalues) if eigenvalues is not None else None
+    width = sum(ATTRIBUTE_CHANNELS[a] for a in attributes[1:]) * N_OCTANTS
+    out = np.empty((len(queries), width))
+    for lo in range(0, len(queries), GEOMETRY_CHUNK):
+        hi = min(len(queries), lo + GEOMETRY_CHUNK)
+        nb, octant = neighbours[lo:hi], octants[lo:hi]
+        blocks = []
+        for name in attributes[1:]:
+            if name == "normal":
+                # Neighbour j's normal (third axis of its frame) in query i's frame.
+                values = np.einsum("qkd,qdj->jqk", frames[nb, :, 2], frames[queries[lo:hi]])
+            else:
+                values = np.moveaxis(features[nb], 2, 0)  # (7, q, k)
+            blocks.append(octant_means(values, octant))
+        out[lo:hi] = np.hstack(blocks)
+    return out

@@ -1,0 +1,322 @@
+"""The fitted hop tree: fitting hop after hop over many clouds, and the forward pass.
+
+A :class:`HopTree` holds, for every hop, the Saab kernels of its channels, the training
+mean of every output, every output's energy and the outputs passed on (or, for the last
+hop, kept in the descriptor), and optionally the principal axes of the descriptors.
+:meth:`HopTree.fit` learns them from clouds; :meth:`HopTree.describe` gives one row per
+point of a cloud.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from joblib import Parallel, delayed, effective_n_jobs
+
+from ..._utils.progress import progress_bar
+from ..._utils.threads import one_blas_thread
+from ._config import HopConfig
+from ._geometry import CloudGeometry, build_geometry
+from ._saab import MomentAccumulator, apply_saab, fit_saab
+
+__all__ = ["HopTree"]
+
+# Fitting keeps each cloud's hop structure and current features in memory while their
+# total stays under this many bytes (about 2 MB per 1024-point cloud); the clouds beyond
+# it are recomputed in every hop's pass instead, so memory stays bounded for any number
+# of training clouds.
+FIT_CACHE_BYTES = 2 * 1024**3
+# Clouds whose structure is computed per parallel batch.
+_CHUNK_PER_JOB = 8
+
+
+@dataclass
+class HopTree:
+    """Fitted hops (see the estimator's attributes of the same names, with a ``_``).
+
+    Attributes
+    ----------
+    kernels, means, energies, selected : list of ndarray
+        Per hop: Saab kernels ``(n_channels, dim, dim)``, output means and energies
+        ``(n_channels, dim)``, and the flattened indices of the outputs passed on.
+    components, explained_variance, pca_mean : ndarray or None
+        Principal axes of the descriptors, their variances and the descriptors' mean.
+    """
+
+    kernels: list
+    means: list
+    energies: list
+    selected: list
+    components: np.ndarray | None = None
+    explained_variance: np.ndarray | None = None
+    pca_mean: np.ndarray | None = None
+
+    @property
+    def n_full_features(self) -> int:
+        """Outputs of the last hop (the descriptor before any projection)."""
+        return int(self.selected[-1].size)
+
+    # ------------------------------------------------------------------ fitting
+    @classmethod
+    def fit(
+        cls,
+        clouds: list[np.ndarray],
+        config: HopConfig,
+        *,
+        energy_threshold: float,
+        n_components: int | None,
+        n_jobs: int | None,
+        progress: bool | None,
+    ) -> HopTree:
+        """Fit hop after hop; every hop needs the previous hop's outputs of every cloud.
+
+        Clouds whose structure and current features fit in :data:`FIT_CACHE_BYTES` are
+        kept in memory between hops; the others are recomputed from scratch in every
+        pass. With ``n_components``, one more pass gathers the covariance of the
+        descriptors.
+        """
+        tree = cls(kernels=[], means=[], energies=[], selected=[])
+        n_threads = max(1, effective_n_jobs(n_jobs))  # over blocks of one cloud's points
+        n_hops = config.n_hops
+        cache: dict[int, CloudGeometry] = {}
+        features: dict[int, np.ndarray] = {}  # current hop's output of the cached clouds
+        used = 0
+        parent_energy = np.ones(1)
+        passes = n_hops + (n_components is not None)
+        bar = progress_bar(
+            passes * len(clouds),
+            desc="fit",
+            unit="cloud",
+            enabled=progress,
+            large=len(clouds) >= 200,
+        )
+        for hop in range(passes):
+            pca = hop == n_hops
+            moments = (
+                MomentAccumulator(1, tree.selected[-1].size)
+                if pca
+                else MomentAccumulator(len(parent_energy), config.hop1_dim if hop == 0 else 8)
+            )
+            for i, geometry in _geometry_batches(clouds, config, cache, n_jobs):
+                # Room for the structure and, later, the features it produces.
+                if hop == 0 and used + 2 * geometry.nbytes <= FIT_CACHE_BYTES:
+                    cache[i] = geometry
+                    used += 2 * geometry.nbytes
+                if pca:
+                    previous = (
+                        features.get(i)
+                        if i in cache
+                        else tree.forward(geometry, hop - 1, n_threads)
+                    )
+                    moments.update(tree.hop(hop - 1, geometry, previous, n_threads)[None])
+                else:
+                    previous = (
+                        features.get(i) if i in cache else tree.forward(geometry, hop, n_threads)
+                    )
+                    moments.update(_hop_inputs(hop, geometry, previous))
+                if bar is not None:
+                    bar.update(1)
+            if pca:
+                tree._add_pca(moments, n_components)
+                break
+            parent_energy = tree._add_hop(
+                moments, parent_energy, energy_threshold, last=hop == n_hops - 1
+            )
+            if hop < n_hops - 1:
+                for i, geometry in cache.items():
+                    features[i] = tree.hop(hop, geometry, features.get(i), n_threads)
+        if bar is not None:
+            bar.close()
+        return tree
+
+    def _add_hop(
+        self,
+        moments: MomentAccumulator,
+        parent_energy: np.ndarray,
+        energy_threshold: float,
+        last: bool,
+    ) -> np.ndarray:
+        """Fit one hop's Saab kernels and select its channels; return their energies."""
+        saab = fit_saab(moments)
+        energy = parent_energy[:, None] * saab.energy
+        flat = energy.ravel()
+        threshold = float(energy_threshold)
+        # The last hop keeps every output of the channels it receives (the descriptor).
+        selected = np.arange(flat.size) if last else np.flatnonzero(flat >= threshold)
+        if selected.size == 0 or not np.any(flat > 0):
+            raise ValueError(
+                f"no channel of hop {len(self.kernels) + 1} has energy above "
+                f"energy_threshold={threshold}: the training clouds carry no usable "
+                "variation (are they all the same degenerate shape?); fit on more varied "
+                "clouds or lower the threshold"
+            )
+        self.kernels.append(saab.kernels)
+        self.means.append(saab.mean)
+        self.energies.append(energy)
+        self.selected.append(selected)
+        return flat[selected]
+
+    def _add_pca(self, moments: MomentAccumulator, n_components: int) -> None:
+        """Principal axes of the descriptors (the last hop's outputs)."""
+        n_full = self.n_full_features
+        if n_components > n_full:
+            raise ValueError(
+                f"n_components={n_components} exceeds the {n_full} outputs of the last "
+                "hop; choose at most that many"
+            )
+        variance, axes = np.linalg.eigh(moments.covariance()[0])
+        order = np.argsort(variance, kind="stable")[::-1][:n_components]
+        axes = axes[:, order].T  # (k, n_full)
+        # Sign fix, as for the Saab kernels: the largest-magnitude weight is positive.
+        pivot = axes[np.arange(len(axes)), np.abs(axes).argmax(axis=1)]
+        axes *= np.where(pivot < 0, -1.0, 1.0)[:, None]
+        # Rounded to float32 as the model file stores them: a saved and reloaded model
+        # projects exactly as the fitted one.
+        self.components = axes.astype(np.float32).astype(np.float64)
+        self.explained_variance = np.clip(variance[order], 0.0, None)
+        self.pca_mean = moments.mean[0].copy()
+
+    def projection(self, n_components: int | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(mean, axes.T)`` in float64 for ``n_components`` axes, or None for the full
+        descriptor.
+
+        Raises
+        ------
+        ValueError
+            If the tree holds fewer principal axes.
+        """
+        if n_components is None:
+            return None
+        stored = 0 if self.components is None else len(self.components)
+        if n_components > stored:
+            raise ValueError(
+                f"n_components={n_components}, but this model was fitted with "
+                f"{'no' if not stored else stored} principal axes; refit with "
+                f"n_components={n_components} (or set a smaller value)"
+            )
+        axes = np.ascontiguousarray(self.components[:n_components].T, dtype=np.float64)
+        return self.pca_mean, axes
+
+    # ------------------------------------------------------------------ forward pass
+    def hop(
+        self, hop: int, geometry: CloudGeometry, previous: np.ndarray | None, n_threads: int
+    ) -> np.ndarray:
+        """Outputs of ``hop`` (0-based) that go on, float32 ``(n_selected, n_queries)``."""
+        selected = self.selected[hop]
+        if hop == 0:
+            attrs = _hop_inputs(0, geometry, None)
+            out = apply_saab(attrs, self.kernels[0], self.means[0])
+            return out.reshape(-1, out.shape[2])[selected]
+        pooling = geometry.poolings[hop - 1]
+        out = np.empty((selected.size, pooling.n_queries), dtype=np.float32)
+        pooling.map_blocks(previous, self._block_writer(hop, out, transposed=False), n_threads)
+        return out
+
+    def forward(
+        self, geometry: CloudGeometry, n_hops: int | None = None, n_threads: int = 1
+    ) -> np.ndarray:
+        """Run the first ``n_hops`` hops (all by default) on a cloud's geometry; return
+        the last one's output, ``(n_selected, n_queries)``."""
+        n_hops = len(self.kernels) if n_hops is None else n_hops
+        feats = None
+        for hop in range(n_hops):
+            feats = self.hop(hop, geometry, feats, n_threads)
+        return feats
+
+    def _block_writer(self, hop: int, out: np.ndarray, transposed: bool, projection=None, bar=None):
+        """A ``consume`` for :meth:`OctantPooling.map_blocks`: Saab-transform a block and
+        store its selected outputs in ``out[:, start:stop]`` (or, ``transposed``, in rows
+        ``out[start:stop]``, projected on ``projection = (mean, axes)`` if given)."""
+        kernels, means, selected = self.kernels[hop], self.means[hop], self.selected[hop]
+        keep_all = selected.size == kernels.shape[0] * kernels.shape[2]
+
+        def write(start: int, stop: int, attrs: np.ndarray) -> None:
+            block = apply_saab(attrs, kernels, means).reshape(-1, stop - start)
+            if not keep_all:
+                block = block[selected]
+            if projection is not None:
+                # A BLAS product rounds a row by where it sits in the kernel's tiles. In
+                # float64 that is far below float32's resolution, so once rounded to
+                # float32 the rows come out the same wherever they sit: permuting the
+                # cloud permutes the result (measured: no difference in 320k values).
+                mean, axes = projection
+                out[start:stop] = (block.T - mean) @ axes
+            elif transposed:
+                out[start:stop] = block.T
+            else:
+                out[:, start:stop] = block
+            if bar is not None:
+                bar.update(stop - start)
+
+        return write
+
+    def describe(
+        self,
+        points: np.ndarray,
+        config: HopConfig,
+        *,
+        n_components: int | None = None,
+        n_threads: int = 1,
+        progress: bool | None = None,
+    ) -> np.ndarray:
+        """One descriptor row per point of a validated cloud, float32.
+
+        The last hop is evaluated block by block, each block's outputs transposed into
+        their rows while still in cache (one transposed copy of the whole result would
+        cost about a quarter of the transform). BLAS runs on one thread meanwhile: the
+        blocks' threads are ``n_threads``, and nothing else.
+        """
+        with one_blas_thread():
+            return self._describe_blocks(points, config, n_components, n_threads, progress)
+
+    def _describe_blocks(self, points, config, n_components, n_threads, progress) -> np.ndarray:
+        projection = self.projection(n_components)
+        n_out = self.n_full_features if n_components is None else int(n_components)
+        bar = progress_bar(
+            len(points),
+            desc="describe",
+            unit="pt",
+            enabled=progress,
+            large=len(points) >= 100_000,
+        )
+        geometry = build_geometry(points, config, for_fit=False)
+        last = len(self.kernels) - 1
+        if last == 0:
+            out = np.ascontiguousarray(self.forward(geometry, n_threads=n_threads).T)
+            if projection is not None:
+                out = ((out - projection[0]) @ projection[1]).astype(np.float32)
+        else:
+            previous = self.forward(geometry, last, n_threads)
+            out = np.empty((geometry.n_points, n_out), dtype=np.float32)
+            writer = self._block_writer(last, out, True, projection, bar)
+            geometry.poolings[last - 1].map_blocks(previous, writer, n_threads)
+        if bar is not None:
+            bar.close()
+        return out
+
+
+def _hop_inputs(hop: int, geometry: CloudGeometry, previous: np.ndarray | None) -> np.ndarray:
+    """Attributes entering ``hop`` (0-based), channel-major float32
+    ``(n_channels, dim, n_queries)``; ``previous`` is the former hop's output,
+    ``(n_channels, n_points)``."""
+    if hop == 0:
+        return geometry.hop1_attributes.T[None].astype(np.float32)
+    return geometry.poolings[hop - 1](previous)
+
+
+def _geometry_batches(
+    clouds: list[np.ndarray], config: HopConfig, cache: dict[int, CloudGeometry], n_jobs
+):
+    """Yield ``(index, geometry)`` for every cloud; uncached ones are computed in
+    parallel batches of ``n_jobs`` joblib tasks."""
+    n_jobs = effective_n_jobs(n_jobs)
+    chunk = max(1, n_jobs * _CHUNK_PER_JOB)
+    with Parallel(n_jobs=n_jobs) as parallel:
+        for start in range(0, len(clouds), chunk):
+            idx = range(start, min(start + chunk, len(clouds)))
+            missing = [i for i in idx if i not in cache]
+            computed = parallel(delayed(build_geometry)(clouds[i], config, True) for i in missing)
+            fresh = dict(zip(missing, computed, strict=True))
+            for i in idx:
+                yield i, cache[i] if i in cache else fresh[i]

@@ -1,0 +1,120 @@
+"""What the dataset runners share: progress, machine facts, resolutions, the method loop."""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+
+from .._utils.progress import progress_bar
+from ..descriptors import RPointHopTransformer
+from ..open3d_interop import to_point_cloud
+from ..registration.defaults import DEFAULT_GLOBAL_POINTS
+from ..registration.settings import resolve_voxel_size
+from .methods import METHODS, run_method
+from .metrics import is_symmetry, pair_errors, summarize
+
+__all__ = ["Progress", "register_resolution", "fixed_resolution"]
+
+
+class Progress:
+    """A ``tqdm`` bar on stderr for a benchmark (shown when enabled and stderr is a
+    terminal, or when ``enabled`` is True and asked explicitly by the caller)."""
+
+    def __init__(self, total: int, label: str, enabled: bool = True) -> None:
+        self.bar = progress_bar(
+            max(total, 1), desc=label, unit="pair", enabled=None if enabled else False
+        )
+
+    def step(self, note: str = "") -> None:
+        if self.bar is not None:
+            self.bar.set_postfix_str(note[:30], refresh=False)
+            self.bar.update(1)
+            if self.bar.n >= self.bar.total:
+                self.bar.close()
+
+
+def register_resolution(pair) -> float:
+    """``register()``'s resolution rule (``voxel_size="auto"``, 2048 global points)
+    applied to a pair as given: the bunny benchmark's Open3D recipes run at it, so that
+    every method of a run works at about one resolution. (``register()`` applies the rule
+    to centred clouds, which can shift the voxel grid and so the chosen voxel slightly;
+    the 3DMatch benchmark takes the voxel from a ``RegistrationContext`` instead, which is
+    exactly ``register()``'s. Kept as it is so that the bunny results stay comparable.)"""
+    source, target = to_point_cloud(pair.source), to_point_cloud(pair.target)
+    return resolve_voxel_size(source, target, "auto", DEFAULT_GLOBAL_POINTS)[0]
+
+
+def fixed_resolution(voxel: float) -> Callable[[object], float]:
+    """One resolution for every pair (ModelNet40: Open3D's tutorial value for objects
+    in the unit sphere)."""
+    return lambda pair: voxel
+
+
+def machine_facts() -> dict:
+    """The machine and library versions a run was measured with."""
+    import os
+
+    import open3d
+
+    return {
+        "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores",
+        "python": platform.python_version(),
+        "open3d": open3d.__version__,
+        "numpy": np.__version__,
+    }
+
+
+def model_facts(model: RPointHopTransformer) -> dict:
+    """Size of the model's file and of its descriptors (the 'green' figures)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "model.npz"
+        model.save(path)
+        size = path.stat().st_size
+    return {
+        "model_file_bytes": size,
+        "model_n_features_out": int(model.n_features_out_),
+        "model_params": model.get_params(),
+    }
+
+
+def check_methods(methods: Iterable[str], scenes: bool = False) -> list[str]:
+    """``methods`` as a list, refused if one is unknown or (without ``scenes``) needs
+    the 3DMatch scenes."""
+    methods = list(methods)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"unknown methods {unknown}; choose from {sorted(METHODS)}")
+    if not scenes:
+        scene_only = [m for m in methods if METHODS[m].scenes_only]
+        if scene_only:
+            raise ValueError(f"{scene_only} need the 3DMatch scenes (benchmark 3dmatch)")
+    return methods
+
+
+def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=None, tol=(5.0, 0.05)):
+    """Run every method on every pair; return {method: summary} and per-pair records.
+
+    ``shapes`` (the whole shape of each pair) enables the symmetry check; ``tol`` is the
+    success threshold (rotation in degrees, translation in the data's unit).
+    """
+    summaries, records = {}, {}
+    voxels = [voxel_of(pair) for pair in pairs]  # once per pair, not once per method
+    for method in methods:
+        recs = []
+        for k, pair in enumerate(pairs):
+            estimate, seconds = run_method(
+                method, pair.source, pair.target, descriptor=model, voxel=voxels[k], seed=seed
+            )
+            rec = {**pair_errors(estimate, pair.truth), "seconds": seconds, "pair": pair.name}
+            if shapes is not None:
+                rec["symmetric"] = is_symmetry(estimate, pair.truth, shapes[k])
+            recs.append(rec)
+            progress.step(method)
+        summaries[method] = summarize(recs, *tol)
+        records[method] = recs
+    return summaries, records

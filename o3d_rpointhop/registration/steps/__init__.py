@@ -1,0 +1,28 @@
+"""Registration steps, one module per algorithm: the global estimators :mod:`.svd`
+(the paper's one-shot SVD), :mod:`.ransac` (with its vectorised kernel in
+:mod:`._ransac`) and :mod:`.fgr`, the refinements in :mod:`.icp`, and
+:mod:`.symmetry`; :mod:`._base` holds the step base class and :mod:`._global` what the
+global steps share."""
+
+from ._base import OPTIONAL_DISTANCE, RegistrationStep
+from ._global import GlobalStep
+from .fgr import FGRGlobal, tuple_test
+from .icp import GeneralizedICP, MultiScaleICP, PointToPlaneICP, PointToPointICP
+from .ransac import RANSACGlobal
+from .svd import SVDGlobal
+from .symmetry import SymmetryCheck
+
+__all__ = [
+    "OPTIONAL_DISTANCE",
+    "FGRGlobal",
+    "GeneralizedICP",
+    "GlobalStep",
+    "MultiScaleICP",
+    "PointToPlaneICP",
+    "PointToPointICP",
+    "RANSACGlobal",
+    "RegistrationStep",
+    "SVDGlobal",
+    "SymmetryCheck",
+    "tuple_test",
+]

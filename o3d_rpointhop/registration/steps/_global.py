@@ -1,0 +1,49 @@
+"""What the global steps share: their descriptor, their matches and the constraints of
+their parameters."""
+
+from __future__ import annotations
+
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.utils._param_validation import HasMethods, Interval
+
+from ..context import RegistrationContext
+from ..correspondences import Correspondences, find_correspondences
+from ..defaults import default_descriptor
+from ._base import RegistrationStep
+
+__all__ = ["GlobalStep", "DESCRIPTOR", "COUNT"]
+
+#: The constraint of a step's own descriptor: ``None`` (the pipeline's) or a transformer.
+DESCRIPTOR = [None, HasMethods(["transform"])]
+#: The constraint of a count of matches: at least 3, or a share in (0, 1].
+COUNT = [Interval(Integral, 3, None, closed="left"), Interval(Real, 0, 1, closed="right")]
+
+
+class GlobalStep(RegistrationStep):
+    """Base of the global steps: the descriptor they match with and their matches.
+
+    A global step ignores the incoming transformation. Its descriptor is its own
+    ``descriptor`` parameter, else the context's (the pipeline's), else
+    :func:`~o3d_rpointhop.registration.defaults.default_descriptor`; descriptors are
+    computed once per registration and descriptor (``context.features``).
+    """
+
+    kind = "global"
+
+    def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
+        descriptor = self.descriptor if self.descriptor is not None else context.descriptor
+        if descriptor is None:
+            descriptor = context.descriptor = default_descriptor()
+        return context.features(descriptor, "source"), context.features(descriptor, "target")
+
+    def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
+        src, tgt = self._describe(context)
+        corr = find_correspondences(src, tgt, **filters)
+        if len(corr) < 3:
+            raise ValueError(
+                f"{type(self).__name__}: only {len(corr)} correspondences survived the "
+                "filters; at least 3 are needed (relax mutual_filter / max_ratio / top_k)"
+            )
+        return corr

@@ -1,0 +1,264 @@
+"""RANSAC over putative correspondences, vectorised: hypotheses are drawn, checked and
+scored in batches.
+
+Open3D's ``registration_ransac_based_on_correspondence`` costs about 85 us per iteration
+on one thread (it transforms and scores the whole source cloud for every hypothesis
+that passes its checkers), and it is only repeatable on one thread. Here a batch of
+hypotheses costs a few array operations: triples are drawn with a seeded numpy
+generator, filtered by Open3D's two checkers (edge-length similarity, then the
+distance of the triple's own points after the fit), fitted by a batched Kabsch solve,
+and ranked by the number of correspondences they carry within the distance threshold
+(which also sets when to stop). The best-ranked ones are then verified as Open3D
+scores every hypothesis: by fitness (share of all source points with a target point
+within the threshold), then inlier RMSE, on the whole clouds. The winner is refitted on
+its inlier correspondences while that gathers more of them. Results depend only on
+the seed, not on the number of threads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ...transforms import rigid_transform
+
+__all__ = ["RansacResult", "ransac"]
+
+# Correspondence-hypothesis pairs scored at once (bounds the scoring's temporaries).
+_SCORE_ELEMENTS = 1 << 21
+_FIRST_BATCH = 256
+_MAX_BATCH = 8192
+# Best-ranked hypotheses verified on the whole clouds.
+_VERIFIED = 64
+
+
+@dataclass
+class RansacResult:
+    """Outcome of :func:`ransac`.
+
+    Attributes
+    ----------
+    transformation : ndarray of shape (4, 4)
+    inliers : ndarray of bool, shape (m,)
+        Correspondences within the threshold under ``transformation``.
+    iterations : int
+        Hypotheses drawn.
+    """
+
+    transformation: np.ndarray
+    inliers: np.ndarray
+    iterations: int
+
+
+def _kabsch(src: np.ndarray, tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations ``(b, 3, 3)`` and translations ``(b, 3)`` fitting samples ``(b, n, 3)``."""
+    cs, ct = src.mean(axis=1), tgt.mean(axis=1)
+    cov = np.einsum("bki,bkj->bij", src - cs[:, None], tgt - ct[:, None])
+    u, _, vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))))
+    d[d == 0] = 1.0
+    vt[:, 2, :] *= d[:, None]
+    rot = np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))
+    return rot, ct - np.einsum("bij,bj->bi", rot, cs)
+
+
+def _residuals(rot, shift, src, tgt) -> np.ndarray:
+    """Squared distances ``(b, m)`` between moved ``src`` and ``tgt`` (coordinate planes,
+    ``(3, m)``) for every hypothesis, in the precision of ``src``. Elementwise passes over
+    the planes: the same arithmetic for every entry whatever the thread count, and 11x
+    faster than an ``einsum``."""
+    dtype = src.dtype
+    rot, shift = rot.astype(dtype), shift.astype(dtype)
+    out = None
+    for i in range(3):
+        d = rot[:, i, 0:1] * src[0]
+        d += rot[:, i, 1:2] * src[1]
+        d += rot[:, i, 2:3] * src[2]
+        d += shift[:, i : i + 1] - tgt[i]
+        d *= d
+        out = d if out is None else out + d
+    return out
+
+
+def _needed(ratio: float, confidence: float, sample: int) -> float:
+    """Draws needed to see one all-inlier sample with probability ``confidence``."""
+    good = ratio**sample
+    if good >= 1.0:
+        return 0.0
+    if good <= 0.0:
+        return np.inf
+    return np.log(1.0 - confidence) / np.log1p(-good)
+
+
+def _verify(rot, shift, clouds, threshold: float, tree: cKDTree) -> int:
+    """Index of the hypothesis with the best fitness, then inlier RMSE, on whole clouds
+    (the first on a tie)."""
+    source = clouds[0]
+    # Every hypothesis's moved cloud in one query, on all cores: each point's nearest
+    # neighbour does not depend on how the points are shared out.
+    moved = np.einsum("bij,nj->bni", rot, source) + shift[:, None, :]
+    dist, _ = tree.query(moved.reshape(-1, 3), distance_upper_bound=threshold, workers=-1)
+    dist = dist.reshape(len(rot), len(source))
+    inside = np.isfinite(dist)
+    fitness = inside.mean(axis=1)
+    squares = np.where(inside, dist, 0.0) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rmse = np.sqrt(squares.sum(axis=1) / inside.sum(axis=1))
+    rmse[~inside.any(axis=1)] = np.inf
+    return int(np.lexsort((rmse, -fitness))[0])
+
+
+def _refit_on_clouds(transformation, clouds, threshold: float, tree: cKDTree, rounds: int = 5):
+    """Refit on the clouds' nearest-neighbour pairs within ``threshold`` (as Open3D's
+    RANSAC finishes), while that gathers more pairs."""
+    source = clouds[0]
+    best = transformation
+    count = -1
+    for _ in range(rounds):
+        moved = source @ best[:3, :3].T + best[:3, 3]
+        dist, idx = tree.query(moved, distance_upper_bound=threshold)
+        inside = np.isfinite(dist)
+        if inside.sum() < 3 or inside.sum() <= count:
+            break
+        count = int(inside.sum())
+        try:
+            best = rigid_transform(source[inside], clouds[1][idx[inside]])
+        except ValueError:  # collinear pairs: keep the sample's fit
+            break
+    return best
+
+
+def _refit_on_matches(transformation, planes, sq_threshold, source, target, rounds: int = 5):
+    """Refit on the inlier matches while that gathers more of them."""
+    inliers = _residuals(transformation[None, :3, :3], transformation[None, :3, 3], *planes)[0]
+    inliers = inliers < sq_threshold
+    for _ in range(rounds):
+        if inliers.sum() < 3:
+            break
+        try:
+            refit = rigid_transform(source[inliers], target[inliers])
+        except ValueError:  # collinear inliers: keep the sample's fit
+            break
+        more = _residuals(refit[None, :3, :3], refit[None, :3, 3], *planes)[0] < sq_threshold
+        if more.sum() < inliers.sum():
+            break
+        transformation, grew, inliers = refit, more.sum() > inliers.sum(), more
+        if not grew:
+            break
+    return transformation
+
+
+def ransac(
+    source: np.ndarray,
+    target: np.ndarray,
+    threshold: float,
+    *,
+    max_iteration: int,
+    confidence: float,
+    edge_length: float,
+    seed: int,
+    ransac_n: int = 3,
+    clouds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> RansacResult:
+    """Robust rigid fit to putative matches ``source[i] <-> target[i]``.
+
+    Parameters
+    ----------
+    source, target : ndarray of shape (m, 3)
+        Matched points, ``m >= 3``.
+    threshold : float
+        Inlier distance.
+    max_iteration : int
+        Most hypotheses drawn; drawing stops earlier once the best hypothesis's inlier
+        ratio ``w`` says that ``log(1 - confidence) / log(1 - w^3)`` draws suffice.
+    confidence : float
+        In (0, 1).
+    edge_length : float
+        Edge-length checker similarity in [0, 1): the three edges of a triple must agree
+        within this ratio (0 disables the checker).
+    seed : int
+    ransac_n : int, default=3
+        Correspondences per hypothesis.
+    clouds : (ndarray, ndarray), default=None
+        The whole source and target clouds, to verify the best-ranked hypotheses by
+        fitness; ``None`` keeps the hypothesis with the most inlier correspondences.
+
+    Returns
+    -------
+    RansacResult
+    """
+    # Work about the matches' centre: coordinates stay small wherever the clouds are, so
+    # hypotheses can be scored in float32 (half the memory traffic of float64).
+    centre = np.asarray(target, dtype=np.float64).mean(axis=0)
+    source = np.asarray(source, dtype=np.float64) - centre
+    target = np.asarray(target, dtype=np.float64) - centre
+    planes = np.ascontiguousarray(source.T), np.ascontiguousarray(target.T)
+    planes32 = planes[0].astype(np.float32), planes[1].astype(np.float32)
+    if clouds is not None:
+        clouds = (clouds[0] - centre, clouds[1] - centre)
+    m = len(source)
+    if m < max(3, ransac_n):
+        raise ValueError(f"RANSAC needs at least {max(3, ransac_n)} correspondences, got {m}")
+    rng = np.random.default_rng(seed)
+    sq_threshold = threshold * threshold
+    # The pool of best-ranked hypotheses: rotation, translation, inlier count, cost.
+    pool_rot, pool_shift = np.empty((0, 3, 3)), np.empty((0, 3))
+    pool_count, pool_cost = np.empty(0, dtype=np.int64), np.empty(0)
+    drawn, needed, batch = 0, float(max_iteration), _FIRST_BATCH
+    while drawn < min(max_iteration, needed):
+        size = int(min(batch, max_iteration - drawn))
+        drawn += size
+        batch = min(2 * batch, _MAX_BATCH)
+        samples = rng.integers(0, m, size=(size, ransac_n))
+        samples = samples[(np.diff(np.sort(samples, axis=1), axis=1) != 0).all(axis=1)]
+        src, tgt = source[samples], target[samples]  # (b, ransac_n, 3)
+        if edge_length:
+            ok = np.ones(len(samples), dtype=bool)
+            for a, b in zip(*np.triu_indices(ransac_n, 1), strict=True):
+                ls = np.linalg.norm(src[:, a] - src[:, b], axis=1)
+                lt = np.linalg.norm(tgt[:, a] - tgt[:, b], axis=1)
+                ok &= (ls > edge_length * lt) & (lt > edge_length * ls)
+            src, tgt = src[ok], tgt[ok]
+        if not len(src):
+            continue
+        rot, shift = _kabsch(src, tgt)
+        moved = np.einsum("bij,bkj->bki", rot, src) + shift[:, None, :]
+        ok = (((moved - tgt) ** 2).sum(axis=2) < sq_threshold).all(axis=1)
+        rot, shift = rot[ok], shift[ok]
+        step = max(1, _SCORE_ELEMENTS // m)
+        for lo in range(0, len(rot), step):
+            sq = _residuals(rot[lo : lo + step], shift[lo : lo + step], *planes32)
+            inside = sq < sq_threshold
+            pool_rot = np.concatenate([pool_rot, rot[lo : lo + step]])
+            pool_shift = np.concatenate([pool_shift, shift[lo : lo + step]])
+            pool_count = np.concatenate([pool_count, inside.sum(axis=1)])
+            pool_cost = np.concatenate(
+                [pool_cost, np.where(inside, sq, 0.0).sum(axis=1, dtype=np.float64)]
+            )
+            # Most inliers, then the smallest sum of their squared residuals, then the
+            # first drawn: a seed gives one answer.
+            keep = np.lexsort((pool_cost, -pool_count))[:_VERIFIED]
+            pool_rot, pool_shift = pool_rot[keep], pool_shift[keep]
+            pool_count, pool_cost = pool_count[keep], pool_cost[keep]
+        if len(pool_count):
+            needed = _needed(pool_count[0] / m, confidence, ransac_n)
+    transformation = np.eye(4)
+    if not len(pool_count):  # no sample passed the checkers: no estimate
+        pass
+    elif clouds is not None:
+        tree = cKDTree(clouds[1])
+        best = _verify(pool_rot, pool_shift, clouds, threshold, tree)
+        transformation[:3, :3], transformation[:3, 3] = pool_rot[best], pool_shift[best]
+        transformation = _refit_on_clouds(transformation, clouds, threshold, tree)
+    else:
+        transformation[:3, :3], transformation[:3, 3] = pool_rot[0], pool_shift[0]
+        transformation = _refit_on_matches(transformation, planes, sq_threshold, source, target)
+    inliers = (
+        _residuals(transformation[None, :3, :3], transformation[None, :3, 3], *planes)[0]
+        < sq_threshold
+    )
+    # Back from the centred frame: x -> R (x - c) + t + c.
+    transformation[:3, 3] += centre - transformation[:3, :3] @ centre
+    return RansacResult(transformation=transformation, inliers=inliers, iterations=drawn)
