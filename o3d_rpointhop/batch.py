@@ -19,9 +19,11 @@ whole of the parallelism.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from numbers import Integral
 from typing import Any
 
 import numpy as np
+from sklearn.utils._param_validation import HasMethods, validate_params
 
 from ._utils.parallel import parallel_map, single_threaded
 from ._utils.validation import as_points
@@ -35,6 +37,15 @@ def _describe(descriptor: Any, points: np.ndarray) -> np.ndarray:
     return descriptor.transform(points)
 
 
+@validate_params(
+    {
+        "descriptor": [HasMethods(["transform"])],
+        "clouds": "no_validation",
+        "n_jobs": [None, Integral],
+        "progress": [None, "boolean"],
+    },
+    prefer_skip_nested_validation=False,  # the descriptor is the caller's, checked by itself
+)
 def transform_many(
     descriptor: Any,
     clouds: Iterable[Any],
@@ -76,6 +87,15 @@ def _register(source: np.ndarray, target: np.ndarray, descriptor: Any, options: 
     return register(source, target, descriptor, **options)
 
 
+@validate_params(
+    {
+        "pairs": "no_validation",
+        "descriptor": [None, HasMethods(["transform"])],
+        "n_jobs": [None, Integral],
+        "progress": [None, "boolean"],
+    },
+    prefer_skip_nested_validation=False,  # register() checks its options
+)
 def register_many(
     pairs: Iterable[tuple[Any, Any]],
     descriptor: Any = None,

@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import contextlib
-import io
 import os
-import re
-import sys
-import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -17,48 +14,93 @@ from ._utils.validation import as_points
 
 __all__ = ["read_cloud", "write_cloud", "OPEN3D_FORMATS"]
 
-_ANSI = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
+# Bytes per value of the PLY property types.
+_PLY_SIZES = {
+    **dict.fromkeys(("char", "uchar", "int8", "uint8"), 1),
+    **dict.fromkeys(("short", "ushort", "int16", "uint16"), 2),
+    **dict.fromkeys(("int", "uint", "int32", "uint32", "float", "float32"), 4),
+    **dict.fromkeys(("double", "float64"), 8),
+}
+_PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 
 
-def _flush_c_stdio() -> None:
-    try:
-        import ctypes
+def _check_ply(path: Path) -> int:
+    """The number of vertices a PLY file declares, after checking that its header is
+    well formed and that its body holds them (so that Open3D's reader, whose C parser
+    reports errors by printing, never meets a damaged file); ValueError otherwise.
 
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):  # no C library to call: nothing buffered there
-        pass
+    The body is checked up to the end of the vertex element: by size for binary files,
+    by its number of values for ASCII ones. Elements after the vertices (faces, range
+    grids) are Open3D's to read.
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        first = fh.readline()
+        if first.strip() != b"ply":
+            raise ValueError("not a PLY file: its first line is not 'ply'")
+        header = len(first)
+        fmt, elements = None, []  # elements: [name, count, [property type or None]]
+        for raw in fh:
+            header += len(raw)
+            words = raw.decode("ascii", "replace").split()
+            if not words or words[0] in ("comment", "obj_info"):
+                continue
+            if words[0] == "end_header":
+                break
+            try:
+                if words[0] == "format":
+                    fmt = words[1]
+                elif words[0] == "element":
+                    elements.append([words[1], int(words[2]), []])
+                elif words[0] == "property":
+                    elements[-1][2].append(None if words[1] == "list" else _PLY_SIZES[words[1]])
+                else:
+                    raise ValueError
+            except (ValueError, IndexError, KeyError):
+                raise ValueError(f"bad header line {raw.strip()[:60]!r}") from None
+        else:
+            raise ValueError("its header has no end_header line")
+        if fmt not in _PLY_FORMATS:
+            raise ValueError(f"unknown PLY format {fmt!r}")
+        names = [e[0] for e in elements]
+        if "vertex" not in names:
+            raise ValueError("it has no vertex element")
+        upto = elements[: names.index("vertex") + 1]
+        n_vertices = upto[-1][1]
+        if any(None in properties for _, _, properties in upto):
+            return n_vertices  # list properties: sizes known only while reading
+        if fmt == "ascii":
+            needed = sum(count * len(properties) for _, count, properties in upto)
+            found = len(fh.read().split())
+            what = "values"
+        else:
+            needed = sum(count * sum(properties) for _, count, properties in upto)
+            found = size - header
+            what = "bytes"
+    if found < needed:
+        raise ValueError(f"it ends early: {found} {what} where its vertices need {needed}")
+    return n_vertices
+
+
+_QUIET = {"lock": threading.Lock(), "users": 0, "level": None}
 
 
 @contextlib.contextmanager
-def _captured_output():
-    """Capture what a reader prints: RPly writes to file descriptor 2 from C, Open3D's log
-    goes through Python's ``sys.stdout``; yields a list that receives the text."""
-    captured: list[str] = []
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = [os.dup(1), os.dup(2)]
-    python_level = io.StringIO()
-    with tempfile.TemporaryFile(mode="w+b") as sink:
-        try:
-            os.dup2(sink.fileno(), 1)
-            os.dup2(sink.fileno(), 2)
-            with (
-                contextlib.redirect_stdout(python_level),
-                contextlib.redirect_stderr(python_level),
-                o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Warning),
-            ):
-                yield captured
-        finally:
-            _flush_c_stdio()  # Open3D's log sits in C's stdout buffer until flushed
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            for fd in saved:
-                os.close(fd)
-            sink.seek(0)
-            text = sink.read().decode("utf-8", "replace") + python_level.getvalue()
-            # RPly's own line names the problem best: put it first.
-            lines = sorted(_ANSI.sub("", text).splitlines(), key=lambda ln: "RPly" not in ln)
-            captured.append("\n".join(lines))
+def _quiet_open3d():
+    """Open3D's own warnings off while any thread is reading (a reference count, so
+    threads reading at once restore the caller's level only when the last one is done)."""
+    with _QUIET["lock"]:
+        if _QUIET["users"] == 0:
+            _QUIET["level"] = o3d.utility.get_verbosity_level()
+            o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+        _QUIET["users"] += 1
+    try:
+        yield
+    finally:
+        with _QUIET["lock"]:
+            _QUIET["users"] -= 1
+            if _QUIET["users"] == 0:
+                o3d.utility.set_verbosity_level(_QUIET["level"])
 
 
 # Extensions open3d.io.read_point_cloud understands.
@@ -87,8 +129,14 @@ def read_cloud(path: str | os.PathLike) -> o3d.geometry.PointCloud:
         If ``path`` does not exist.
     ValueError
         If ``path`` is a directory or an empty file, the format is unknown, the file is
-        damaged or truncated (whatever Open3D's reader reports becomes the message, and
-        nothing is printed), or it holds no points or non-finite coordinates.
+        damaged or truncated (a PLY file's header and size are checked before Open3D
+        reads it, so nothing is printed; other formats are refused when Open3D reads no
+        points), or it holds no points or non-finite coordinates.
+
+    Notes
+    -----
+    Safe to call from several threads at once: nothing process-wide is redirected (only
+    Open3D's own warnings are silenced while a read runs).
     """
     path = Path(path)
     if path.is_dir():
@@ -101,13 +149,23 @@ def read_cloud(path: str | os.PathLike) -> o3d.geometry.PointCloud:
         raise ValueError(f"{path}: the file is empty")
     suffix = path.suffix.lower()
     if suffix in OPEN3D_FORMATS:
-        with _captured_output() as log:
+        declared = None
+        if suffix == ".ply":
+            try:
+                declared = _check_ply(path)
+            except (ValueError, OSError) as exc:
+                raise ValueError(f"{path}: damaged or unreadable .ply file ({exc})") from None
+        with _quiet_open3d():
             cloud = o3d.io.read_point_cloud(str(path))
-        problems = [line.strip() for line in log[0].splitlines() if line.strip()]
-        if problems:
-            raise ValueError(f"{path}: damaged or unreadable {suffix} file ({problems[0]})")
         if not cloud.has_points():
-            raise ValueError(f"{path}: no points in this {suffix} file")
+            raise ValueError(
+                f"{path}: no points in this {suffix} file (empty, or damaged: Open3D read none)"
+            )
+        if declared is not None and len(cloud.points) != declared:
+            raise ValueError(
+                f"{path}: damaged or unreadable .ply file ({len(cloud.points)} of "
+                f"{declared} vertices read)"
+            )
         as_points(cloud, name=str(path))  # finiteness check, naming the file
         return cloud
     if suffix in _NUMPY_FORMATS:

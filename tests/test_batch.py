@@ -1,4 +1,4 @@
-"""The batch API: many clouds and pairs on joblib, locally and on a Dask cluster."""
+"""Many clouds and pairs at once, on joblib and Dask."""
 
 from __future__ import annotations
 

@@ -73,6 +73,7 @@ def test_ci_runs_the_readme_test_command():
     commands = [line for line in readme.splitlines() if line.startswith("sh scripts/setup.sh")]
     assert len(commands) == 2, "the quick start has exactly two commands"
     assert "pytest" in commands[1] and "grep" in ci and "pytest" in ci
+    assert "scripts/check_wheel.sh" in ci and (ROOT / "scripts" / "check_wheel.sh").is_file()
 
 
 def test_console_script_entry_point():

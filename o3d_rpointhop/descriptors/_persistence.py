@@ -11,9 +11,9 @@ Layout (format version 3; version 1 files, without the PCA entries and the
                        params, n_hops, n_features_out, n_training_clouds, and
                        training_scenes (optional: the scene folders a scene model saw),
                        registration_points (optional: register()'s global cloud size)
-    hop{h}_kernels     (n_channels, dim, dim) float64
-    hop{h}_means       (n_channels, dim) float64
-    hop{h}_energies    (n_channels, dim) float64
+    hop{h}_kernels     (n_channels, dim, dim) float32
+    hop{h}_means       (n_channels, dim) float32
+    hop{h}_energies    (n_channels, dim) float32
     hop{h}_selected    (n_selected,) int64
     pca_components     (k, n_full) float32   only for models fitted with n_components
     pca_variance       (k,) float64
@@ -81,9 +81,12 @@ def save_model(model: Any, path: str | PathLike) -> None:
         meta["registration_points"] = int(points)
     arrays = {"metadata": np.array(json.dumps(meta))}
     for h in range(len(model.kernels_)):
-        arrays[f"hop{h}_kernels"] = np.asarray(model.kernels_[h], dtype=np.float64)
-        arrays[f"hop{h}_means"] = np.asarray(model.means_[h], dtype=np.float64)
-        arrays[f"hop{h}_energies"] = np.asarray(model.energies_[h], dtype=np.float64)
+        # float32: the transform applies kernels and means in float32 (the features'
+        # precision), so a reloaded model describes exactly as the fitted one, from a
+        # file half the size; the energies are only reported.
+        arrays[f"hop{h}_kernels"] = np.asarray(model.kernels_[h], dtype=np.float32)
+        arrays[f"hop{h}_means"] = np.asarray(model.means_[h], dtype=np.float32)
+        arrays[f"hop{h}_energies"] = np.asarray(model.energies_[h], dtype=np.float32)
         arrays[f"hop{h}_selected"] = np.asarray(model.selected_[h], dtype=np.int64)
     if getattr(model, "components_", None) is not None:
         # float32 axes: ample for a projection whose output is float32, half the file.

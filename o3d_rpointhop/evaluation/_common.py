@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import platform
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -13,10 +13,10 @@ from ..descriptors import RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
 from ..registration.settings import resolve_voxel_size
-from .methods import METHODS, run_method
+from .methods import run_method
 from .metrics import is_symmetry, pair_errors, summarize
 
-__all__ = ["Progress", "register_resolution", "fixed_resolution"]
+__all__ = ["Progress", "evaluate_methods", "fixed_resolution", "register_resolution"]
 
 
 class Progress:
@@ -80,20 +80,6 @@ def model_facts(model: RPointHopTransformer) -> dict:
         "model_n_features_out": int(model.n_features_out_),
         "model_params": model.get_params(),
     }
-
-
-def check_methods(methods: Iterable[str], scenes: bool = False) -> list[str]:
-    """``methods`` as a list, refused if one is unknown or (without ``scenes``) needs
-    the 3DMatch scenes."""
-    methods = list(methods)
-    unknown = [m for m in methods if m not in METHODS]
-    if unknown:
-        raise ValueError(f"unknown methods {unknown}; choose from {sorted(METHODS)}")
-    if not scenes:
-        scene_only = [m for m in methods if METHODS[m].scenes_only]
-        if scene_only:
-            raise ValueError(f"{scene_only} need the 3DMatch scenes (benchmark 3dmatch)")
-    return methods
 
 
 def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=None, tol=(5.0, 0.05)):

@@ -11,12 +11,12 @@ from ..descriptors import RPointHopTransformer
 from ..registration.defaults import default_descriptor
 from ._common import (
     Progress,
-    check_methods,
     evaluate_methods,
     machine_facts,
     model_facts,
     register_resolution,
 )
+from .methods import check_methods
 
 __all__ = ["BUNNY_PROTOCOLS", "run_bunny"]
 
@@ -49,7 +49,7 @@ def run_bunny(
     from ..datasets.bunny import BUNNY_SCANS, load_bunny
     from .protocols import Pair
 
-    methods = check_methods(methods)
+    methods = check_methods(methods, "bunny")
     model = model if model is not None else default_descriptor()
     scans = load_bunny(BUNNY_SCANS, data)
     out = {

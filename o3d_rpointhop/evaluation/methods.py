@@ -13,7 +13,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import open3d as o3d
@@ -23,94 +23,9 @@ from ..descriptors import FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration import RegistrationWarning, register
 
-__all__ = ["DEFAULT_METHODS", "METHODS", "Method", "run_method"]
+__all__ = ["DATASETS", "METHODS", "Method", "default_methods", "check_methods", "run_method"]
 
 reg = o3d.pipelines.registration
-
-
-@dataclass(frozen=True)
-class Method:
-    name: str
-    description: str
-    #: Only on 3DMatch: the method needs the pair's scene (leave-one-scene-out models).
-    scenes_only: bool = False
-
-
-METHODS = {
-    m.name: m
-    for m in (
-        Method("rpointhop-svd", "R-PointHop + the paper's one-shot SVD"),
-        Method("rpointhop-svd-icp", "R-PointHop + SVD + point-to-plane ICP"),
-        Method("rpointhop-ransac", "R-PointHop + RANSAC"),
-        Method("rpointhop-ransac-icp", "R-PointHop + RANSAC + point-to-plane ICP"),
-        Method(
-            "rpointhop-ransac-icp-4096",
-            "R-PointHop + RANSAC + point-to-plane ICP, 4096 global points",
-        ),
-        Method(
-            "rpointhop-scene",
-            "R-PointHop, shipped scene model + RANSAC + point-to-plane ICP (register() defaults)",
-        ),
-        Method(
-            "rpointhop-loso",
-            "R-PointHop, scene model fitted on the other scenes + RANSAC + point-to-plane ICP",
-            scenes_only=True,
-        ),
-        Method(
-            "rpointhop-ransac-icp-sym",
-            "R-PointHop + RANSAC + point-to-plane ICP + symmetry check",
-        ),
-        Method("fpfh-ransac", "FPFH + RANSAC (Open3D's recipe)"),
-        Method("fpfh-fgr", "FPFH + FGR (Open3D's recipe)"),
-        Method("fpfh-ransac-icp", "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe)"),
-        Method(
-            "fpfh-ransac-icp-5cm",
-            "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe), 5 cm voxel",
-        ),
-        Method("fpfh-pipeline-ransac-icp", "FPFH through this library's RANSAC + ICP"),
-        Method(
-            "rpointhop-open3d-ransac-icp",
-            "R-PointHop (32 axes) in Open3D's RANSAC recipe + point-to-plane ICP",
-        ),
-        Method("icp", "point-to-point ICP alone, from the identity"),
-    )
-}
-
-
-#: What ``o3d-rpointhop benchmark <dataset>`` runs when not given ``--methods``.
-DEFAULT_METHODS = {
-    "3dmatch": [
-        "rpointhop-scene",
-        "rpointhop-loso",
-        "rpointhop-ransac-icp-4096",
-        "fpfh-ransac-icp",
-        "fpfh-ransac-icp-5cm",
-        "fpfh-pipeline-ransac-icp",
-    ],
-    # The objects (ModelNet40, bunny): every method but the scene-oriented ones.
-    "objects": [
-        name
-        for name in METHODS
-        if name
-        not in (
-            "rpointhop-scene",
-            "rpointhop-loso",
-            "rpointhop-ransac-icp-4096",
-            "fpfh-ransac-icp-5cm",
-        )
-    ],
-}
-
-# Methods that are Open3D calls from end to end (the others go through register(), whose
-# steps already run Open3D repeatably).
-_OPEN3D_ONLY = {
-    "fpfh-ransac",
-    "fpfh-fgr",
-    "fpfh-ransac-icp",
-    "fpfh-ransac-icp-5cm",
-    "rpointhop-open3d-ransac-icp",
-    "icp",
-}
 
 
 def _fpfh_recipe_inputs(source, target, voxel):
@@ -209,6 +124,220 @@ def shipped_scene_model():
     return _LOADED["scene"]
 
 
+#: The pair datasets a method can be run on (multiway has its own descriptor list).
+DATASETS = ("modelnet40", "bunny", "3dmatch")
+_ALL = frozenset(DATASETS)
+_OBJECTS = frozenset({"modelnet40", "bunny"})
+_SCENES = frozenset({"3dmatch"})
+
+
+@dataclass(frozen=True)
+class Method:
+    """One registration method of the benchmarks.
+
+    Attributes
+    ----------
+    name, description : str
+    run : callable
+        ``run(source, target, descriptor, voxel, seed)`` -> the 4x4 source-to-target
+        transformation.
+    datasets : frozenset of str
+        The datasets it can be run on.
+    default_on : frozenset of str
+        The datasets whose benchmark runs it when no method is named.
+    model : {"given", "scene", "loso", None}
+        The R-PointHop model it describes with: the benchmark's (``"given"``), the
+        shipped scene model, each pair's leave-one-scene-out model, or none (FPFH, ICP).
+    open3d_only : bool
+        Open3D calls from end to end: run on one thread (``repeatable_open3d``), as the
+        library's own steps run Open3D.
+    """
+
+    name: str
+    description: str
+    run: Callable[..., np.ndarray] = field(repr=False)
+    datasets: frozenset = _ALL
+    default_on: frozenset = frozenset()
+    model: str | None = "given"
+    open3d_only: bool = False
+
+
+def _register_with(**options):
+    """A runner through :func:`~o3d_rpointhop.register` with ``options``."""
+
+    def run(source, target, descriptor, voxel, seed):
+        return register(source, target, descriptor, seed=seed, **options).transformation
+
+    return run
+
+
+def _fpfh_recipe(voxel_of: Callable[[float], float] = lambda voxel: voxel, icp: bool = True):
+    """Open3D's FPFH + RANSAC recipe (then its ICP) at ``voxel_of(voxel)``."""
+
+    def run(source, target, descriptor, voxel, seed):
+        voxel = voxel_of(voxel)
+        estimate = _fpfh_ransac(source, target, voxel, seed)
+        return _recipe_icp(source, target, voxel, estimate) if icp else estimate
+
+    return run
+
+
+def _run_fpfh_fgr(source, target, descriptor, voxel, seed):
+    return _fpfh_fgr(source, target, voxel, seed)
+
+
+def _run_fpfh_pipeline(source, target, descriptor, voxel, seed):
+    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
+    return register(source, target, fpfh, seed=seed).transformation
+
+
+def _run_rpointhop_open3d(source, target, descriptor, voxel, seed):
+    estimate = _rpointhop_open3d_ransac(source, target, voxel, seed, _recipe_model())
+    return _recipe_icp(source, target, voxel, estimate)
+
+
+def _run_icp(source, target, descriptor, voxel, seed):
+    return np.array(
+        reg.registration_icp(
+            to_point_cloud(source),
+            to_point_cloud(target),
+            4 * voxel,
+            np.eye(4),
+            reg.TransformationEstimationPointToPoint(False),
+        ).transformation
+    )
+
+
+def _methods(*methods: Method) -> dict[str, Method]:
+    return {m.name: m for m in methods}
+
+
+#: Every method, by name; the order of the reports' rows.
+METHODS = _methods(
+    Method(
+        "rpointhop-svd",
+        "R-PointHop + the paper's one-shot SVD",
+        _register_with(global_method="svd", refine=None),
+        default_on=_OBJECTS,
+    ),
+    Method(
+        "rpointhop-svd-icp",
+        "R-PointHop + SVD + point-to-plane ICP",
+        _register_with(global_method="svd"),
+        default_on=_OBJECTS,
+    ),
+    Method(
+        "rpointhop-ransac", "R-PointHop + RANSAC", _register_with(refine=None), default_on=_OBJECTS
+    ),
+    Method(
+        "rpointhop-ransac-icp",
+        "R-PointHop + RANSAC + point-to-plane ICP",
+        _register_with(),
+        default_on=_OBJECTS,
+    ),
+    Method(
+        "rpointhop-scene",
+        "R-PointHop, shipped scene model + RANSAC + point-to-plane ICP (register() defaults)",
+        _register_with(),
+        default_on=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-loso",
+        "R-PointHop, scene model fitted on the other scenes + RANSAC + point-to-plane ICP",
+        _register_with(),
+        datasets=_SCENES,
+        default_on=_SCENES,
+        model="loso",
+    ),
+    Method(
+        "rpointhop-ransac-icp-4096",
+        "R-PointHop + RANSAC + point-to-plane ICP, 4096 global points",
+        _register_with(n_global_points=4096),
+        default_on=_SCENES,
+    ),
+    Method(
+        "rpointhop-ransac-icp-sym",
+        "R-PointHop + RANSAC + point-to-plane ICP + symmetry check",
+        _register_with(refine=["point_to_plane", "symmetry_check"]),
+        default_on=_OBJECTS,
+    ),
+    Method(
+        "fpfh-ransac",
+        "FPFH + RANSAC (Open3D's recipe)",
+        _fpfh_recipe(icp=False),
+        default_on=_OBJECTS,
+        model=None,
+        open3d_only=True,
+    ),
+    Method(
+        "fpfh-fgr",
+        "FPFH + FGR (Open3D's recipe)",
+        _run_fpfh_fgr,
+        default_on=_OBJECTS,
+        model=None,
+        open3d_only=True,
+    ),
+    Method(
+        "fpfh-ransac-icp",
+        "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe)",
+        _fpfh_recipe(),
+        default_on=_ALL,
+        model=None,
+        open3d_only=True,
+    ),
+    Method(
+        "fpfh-ransac-icp-5cm",
+        "FPFH + RANSAC + point-to-plane ICP (Open3D's recipe), 5 cm voxel",
+        _fpfh_recipe(lambda voxel: 0.05),
+        default_on=_SCENES,
+        model=None,
+        open3d_only=True,
+    ),
+    Method(
+        "fpfh-pipeline-ransac-icp",
+        "FPFH through this library's RANSAC + ICP",
+        _run_fpfh_pipeline,
+        default_on=_ALL,
+        model=None,
+    ),
+    Method(
+        "rpointhop-open3d-ransac-icp",
+        "R-PointHop (32 axes) in Open3D's RANSAC recipe + point-to-plane ICP",
+        _run_rpointhop_open3d,
+        default_on=_OBJECTS,
+        model=None,
+        open3d_only=True,
+    ),
+    Method(
+        "icp",
+        "point-to-point ICP alone, from the identity",
+        _run_icp,
+        default_on=_OBJECTS,
+        model=None,
+        open3d_only=True,
+    ),
+)
+
+
+def default_methods(dataset: str) -> list[str]:
+    """The methods ``o3d-rpointhop benchmark <dataset>`` runs when not given ``--methods``."""
+    return [name for name, m in METHODS.items() if dataset in m.default_on]
+
+
+def check_methods(methods, dataset: str) -> list[str]:
+    """``methods`` as a list, refused if one is unknown or does not apply to ``dataset``."""
+    methods = list(methods)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"unknown methods {unknown}; choose from {sorted(METHODS)}")
+    elsewhere = [m for m in methods if dataset not in METHODS[m].datasets]
+    if elsewhere:
+        where = sorted({d for m in elsewhere for d in METHODS[m].datasets})
+        raise ValueError(f"{elsewhere} do not apply to {dataset} (only to {', '.join(where)})")
+    return methods
+
+
 def run_method(
     name: str,
     source: np.ndarray,
@@ -230,82 +359,27 @@ def run_method(
         Resolution of the FPFH recipe and of ICP alone (0.05 for unit-sphere objects, as
         in the Open3D tutorial).
     """
-    runners: dict[str, Callable[[], np.ndarray]] = {
-        "rpointhop-svd": lambda: (
-            register(
-                source, target, descriptor, global_method="svd", refine=None, seed=seed
-            ).transformation
-        ),
-        "rpointhop-svd-icp": lambda: (
-            register(source, target, descriptor, global_method="svd", seed=seed).transformation
-        ),
-        "rpointhop-ransac": lambda: (
-            register(source, target, descriptor, refine=None, seed=seed).transformation
-        ),
-        "rpointhop-ransac-icp": lambda: (
-            register(source, target, descriptor, seed=seed).transformation
-        ),
-        "rpointhop-ransac-icp-4096": lambda: (
-            register(source, target, descriptor, n_global_points=4096, seed=seed).transformation
-        ),
-        "rpointhop-scene": lambda: (
-            register(source, target, shipped_scene_model(), seed=seed).transformation
-        ),
-        "rpointhop-ransac-icp-sym": lambda: (
-            register(
-                source, target, descriptor, refine=["point_to_plane", "symmetry_check"], seed=seed
-            ).transformation
-        ),
-        "fpfh-ransac": lambda: _fpfh_ransac(source, target, voxel, seed),
-        "fpfh-fgr": lambda: _fpfh_fgr(source, target, voxel, seed),
-        "fpfh-ransac-icp": lambda: _recipe_icp(
-            source, target, voxel, _fpfh_ransac(source, target, voxel, seed)
-        ),
-        "fpfh-ransac-icp-5cm": lambda: _recipe_icp(
-            source, target, 0.05, _fpfh_ransac(source, target, 0.05, seed)
-        ),
-        "fpfh-pipeline-ransac-icp": lambda: (
-            register(
-                source, target, FPFHTransformer(radius="auto", normal_radius="auto"), seed=seed
-            ).transformation
-        ),
-        "rpointhop-open3d-ransac-icp": lambda: _recipe_icp(
-            source,
-            target,
-            voxel,
-            _rpointhop_open3d_ransac(source, target, voxel, seed, _recipe_model()),
-        ),
-        "icp": lambda: np.array(
-            reg.registration_icp(
-                to_point_cloud(source),
-                to_point_cloud(target),
-                4 * voxel,
-                np.eye(4),
-                reg.TransformationEstimationPointToPoint(False),
-            ).transformation
-        ),
-    }
-    # The pair's leave-one-scene-out model goes through register() like any model.
-    runners["rpointhop-loso"] = runners["rpointhop-ransac-icp"]
-    if name not in runners:
+    if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
-    # Open3D's recipe warns when its mutual filter leaves few matches; the result says it.
-    # Its RANSAC is only repeatable on one thread (see repeatable_open3d), as ours runs.
+    method = METHODS[name]
     # Loading a model file is not part of a method's time.
+    if method.model == "scene":
+        descriptor = shipped_scene_model()
     if name == "rpointhop-open3d-ransac-icp":
         _recipe_model()
-    if name == "rpointhop-scene":
-        shipped_scene_model()
     # Flagged results are scored like any other; the flags' warnings would only repeat.
+    # Open3D's recipe warns when its mutual filter leaves few matches; the result says
+    # it. Its RANSAC is only repeatable on one thread (see repeatable_open3d), as ours
+    # runs.
     with (
         warnings.catch_warnings(),
         o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error),
     ):
         warnings.simplefilter("ignore", RegistrationWarning)
         start = time.perf_counter()
-        if name in _OPEN3D_ONLY:
+        if method.open3d_only:
             with repeatable_open3d():
-                transformation = runners[name]()
+                transformation = method.run(source, target, descriptor, voxel, seed)
         else:
-            transformation = runners[name]()
+            transformation = method.run(source, target, descriptor, voxel, seed)
         return transformation, time.perf_counter() - start

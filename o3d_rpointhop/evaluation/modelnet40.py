@@ -10,12 +10,12 @@ from ..descriptors import RPointHopTransformer
 from ..registration.defaults import default_descriptor
 from ._common import (
     Progress,
-    check_methods,
     evaluate_methods,
     fixed_resolution,
     machine_facts,
     model_facts,
 )
+from .methods import check_methods
 from .protocols import PROTOCOLS, make_pairs
 
 __all__ = ["MODELNET40_PROTOCOLS", "ANGLE_SWEEP", "run_modelnet40"]
@@ -66,7 +66,7 @@ def run_modelnet40(
     unknown = [p for p in protocols if p not in MODELNET40_PROTOCOLS]
     if unknown:
         raise ValueError(f"unknown protocols {unknown}; choose from {sorted(MODELNET40_PROTOCOLS)}")
-    methods = check_methods(methods)
+    methods = check_methods(methods, "modelnet40")
     train = load_modelnet40("train", data)
     test = load_modelnet40("test", data)
     model = model if model is not None else default_descriptor()

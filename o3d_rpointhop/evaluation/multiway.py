@@ -9,6 +9,7 @@ poses; success is every scan within 2 deg and 2 mm.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ from ..descriptors import FPFHTransformer
 from ..registration.multiway import register_multiway
 from ..transforms import apply_transform, rotation_error_deg
 
-__all__ = ["OBJECTS", "run_multiway", "plot_reconstruction"]
+__all__ = ["OBJECTS", "MultiwayRun", "run_multiway", "plot_reconstruction"]
 
 OBJECTS = ("bunny", "dragon")
 DESCRIPTORS = {
@@ -34,9 +35,28 @@ def _scans(name: str, data):
     return load_bunny(BUNNY_SCANS, data) if name == "bunny" else load_dragon(data)
 
 
+@dataclass
+class MultiwayRun:
+    """What :func:`run_multiway` measured.
+
+    Attributes
+    ----------
+    results : dict
+        JSON-ready: settings, and per object its scans and, per descriptor, each scan's
+        errors, the edges kept, the time and the poses.
+    moved : dict
+        Per object, the scans as they were registered (moved from their official
+        poses), for pictures; not part of the results.
+    """
+
+    results: dict
+    moved: dict = field(default_factory=dict)
+
+
 def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, seed=0):
-    """Every object with every descriptor; returns a JSON-ready dict."""
+    """Every object with every descriptor; returns a :class:`MultiwayRun`."""
     out = {"dataset": "multiway", "settings": {"seed": seed, "tolerance": TOLERANCE}, "objects": {}}
+    moved_scans = {}
     for name in objects:
         scans = _scans(name, data)
         names = list(scans)
@@ -90,20 +110,21 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
                 "seconds": result.seconds,
                 "poses": [None if p is None else p.tolist() for p in result.poses],
             }
-        entry["moved"] = moved
+        moved_scans[name] = moved
         out["objects"][name] = entry
-    return out
+    return MultiwayRun(results=out, moved=moved_scans)
 
 
-def plot_reconstruction(entry: dict, method: str, path: Path, title: str) -> None:
-    """The merged scans coloured by scan, seen along their thinnest axis."""
+def plot_reconstruction(run: MultiwayRun, name: str, method: str, path: Path, title: str) -> None:
+    """Object ``name`` rebuilt by ``method``: the merged scans coloured by scan, seen
+    along their thinnest axis."""
     from ..plotting import require_matplotlib
 
     figure_class = require_matplotlib()
-    poses = entry["methods"][method]["poses"]
+    poses = run.results["objects"][name]["methods"][method]["poses"]
     parts = [
         apply_transform(m[:: max(1, len(m) // 3000)], np.array(p))
-        for m, p in zip(entry["moved"], poses, strict=True)
+        for m, p in zip(run.moved[name], poses, strict=True)
         if p is not None
     ]
     every = np.concatenate(parts)

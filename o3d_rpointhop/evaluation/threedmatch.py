@@ -11,15 +11,12 @@ from ..descriptors import FPFHTransformer, RPointHopTransformer
 from ..registration.context import RegistrationContext
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
 from ..transforms import rotation_error_deg, translation_error
-from ._common import Progress, check_methods, machine_facts, model_facts
-from .methods import run_method, shipped_scene_model
+from ._common import Progress, machine_facts, model_facts
+from .methods import METHODS, check_methods, run_method, shipped_scene_model
 from .metrics import match_inlier_ratio, rmse_3dmatch
 from .scene_models import leave_one_scene_out
 
 __all__ = ["run_3dmatch"]
-
-# Methods whose descriptor is a scene model, not the ``model`` argument.
-_SCENE_METHODS = {"rpointhop-scene", "rpointhop-loso"}
 
 
 def run_3dmatch(
@@ -57,7 +54,7 @@ def run_3dmatch(
     """
     from ..datasets.threedmatch import load_3dmatch_pairs
 
-    methods = check_methods(methods, scenes=True)
+    methods = check_methods(methods, "3dmatch")
     model = model if model is not None else default_descriptor()
     pairs = load_3dmatch_pairs(data)
     if scenes is not None:
@@ -74,7 +71,8 @@ def run_3dmatch(
             picked += [these[k] for k in keep]
         pairs = picked
     pair_scenes = sorted({p.scene for p in pairs})
-    scene_model = shipped_scene_model() if "rpointhop-scene" in methods else None
+    uses = {METHODS[m].model for m in methods}
+    scene_model = shipped_scene_model() if "scene" in uses else None
     seen = set(getattr(model, "training_scenes_", None) or [])
     if scene_model is not None:
         seen |= set(scene_model.training_scenes_)
@@ -90,7 +88,7 @@ def run_3dmatch(
         "protocols": {},
     }
     loso = {}
-    if "rpointhop-loso" in methods:
+    if "loso" in uses:
         start = time.perf_counter()
         fitting = Progress(len(pair_scenes), "leave-one-scene-out models", progress)
         loso = leave_one_scene_out(pair_scenes, data, progress=fitting.step)
@@ -101,22 +99,24 @@ def run_3dmatch(
         }
 
     def descriptor_of(method: str, pair):
-        if method == "rpointhop-loso":
+        kind = METHODS[method].model
+        if kind == "loso":
             return loso[pair.scene]
-        return scene_model if method == "rpointhop-scene" else model
+        return scene_model if kind == "scene" else model
 
     # Feature-match recall of each descriptor the methods use, on the clouds register()
     # describes with it (its resolution and, for scene models, 4096 points): by name,
     # a method that uses it (None: FPFH).
     fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
     families = {"fpfh": None}
-    plain = [m for m in methods if m.startswith("rpointhop") and m not in _SCENE_METHODS]
-    if plain:
-        families["rpointhop"] = plain[0]
-    if scene_model is not None:
-        families["scene"] = "rpointhop-scene"
-    if loso:
-        families["leave-one-scene-out"] = "rpointhop-loso"
+    for family, kind in (
+        ("rpointhop", "given"),
+        ("scene", "scene"),
+        ("leave-one-scene-out", "loso"),
+    ):
+        first = next((m for m in methods if METHODS[m].model == kind), None)
+        if first is not None:
+            families[family] = first
     bar = Progress((len(methods) + len(families)) * len(pairs), "3dmatch", progress)
     fmr = {name: [] for name in families}
     voxels = {}  # the resolution register() picks, per pair

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
+from numbers import Integral, Real
 
 import numpy as np
 import open3d as o3d
+from sklearn.utils._param_validation import Interval, validate_params
 
 __all__ = ["Correspondences", "count_of", "find_correspondences", "nearest_descriptors"]
 
@@ -130,11 +132,22 @@ def count_of(value: int | float, n: int, minimum: int = 1) -> int:
     raise ValueError(f"a count must be an int >= 1 or a share in (0, 1], got {value!r}")
 
 
-def _check_positive(value, name: str) -> None:
-    if value is not None and not (isinstance(value, numbers.Real) and value > 0):
-        raise ValueError(f"{name} must be None or a positive number, got {value!r}")
+_COUNT = [None, Interval(Integral, 1, None, closed="left"), Interval(Real, 0, 1, closed="right")]
+_POSITIVE = [None, Interval(Real, 0, None, closed="neither")]
 
 
+@validate_params(
+    {
+        "source_features": "no_validation",
+        "target_features": "no_validation",
+        "mutual_filter": ["boolean"],
+        "max_distance": _POSITIVE,
+        "max_ratio": _POSITIVE,
+        "top_k": _COUNT,
+        "top_k_ratio": _COUNT,
+    },
+    prefer_skip_nested_validation=True,
+)
 def find_correspondences(
     source_features,
     target_features,
@@ -184,13 +197,8 @@ def find_correspondences(
             f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
         )
     n = len(src)
-    try:
-        top_k = None if top_k is None else count_of(top_k, n)
-        top_k_ratio = None if top_k_ratio is None else count_of(top_k_ratio, n)
-    except ValueError as exc:
-        raise ValueError(f"top_k / top_k_ratio: {exc}") from None
-    _check_positive(max_distance, "max_distance")
-    _check_positive(max_ratio, "max_ratio")
+    top_k = None if top_k is None else count_of(top_k, n)
+    top_k_ratio = None if top_k_ratio is None else count_of(top_k_ratio, n)
 
     idx, dist = nearest_descriptors(src, tgt, k=2)
     nearest = idx[:, 0]

@@ -16,15 +16,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
 import open3d as o3d
+from sklearn.utils._param_validation import HasMethods, Interval, validate_params
 
 from .._utils.geometry import point_spacing
 from .._utils.parallel import parallel_map, single_threaded
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points
+from ..open3d_interop import to_point_cloud
 from .correspondences import find_correspondences
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor
 from .quality import MAX_SPREAD
@@ -43,6 +46,23 @@ MIN_EDGE_FITNESS = 0.3
 RETRIEVED_NEIGHBOURS = 6
 #: Up to this many scans, every pair is a candidate.
 ALL_PAIRS_UP_TO = 12
+
+
+#: Colours of the scans in a merged cloud, in scan order (matplotlib's "tab10").
+SCAN_COLOURS = np.array(
+    [
+        [0.12, 0.47, 0.71],
+        [1.0, 0.5, 0.05],
+        [0.17, 0.63, 0.17],
+        [0.84, 0.15, 0.16],
+        [0.58, 0.4, 0.74],
+        [0.55, 0.34, 0.29],
+        [0.89, 0.47, 0.76],
+        [0.5, 0.5, 0.5],
+        [0.74, 0.74, 0.13],
+        [0.09, 0.75, 0.81],
+    ]
+)
 
 
 @dataclass
@@ -75,6 +95,79 @@ class MultiwayResult:
     unconnected: list = field(default_factory=list)
     voxel_size: float = 0.0
     seconds: float = 0.0
+
+    def merge(
+        self, clouds: list[Any], *, voxel_size: float | None = None, colour: bool = True
+    ) -> o3d.geometry.PointCloud:
+        """The placed scans in scan 0's frame as one voxel-downsampled cloud.
+
+        Parameters
+        ----------
+        clouds : list of array-like (n_k, 3) or Open3D point clouds
+            The scans given to :func:`register_multiway`, in the same order.
+        voxel_size : float, default=None
+            Voxel of the merged cloud; ``None`` is half the common resolution.
+        colour : bool, default=True
+            Paint each scan in its own colour (:data:`SCAN_COLOURS`, in scan order).
+
+        Returns
+        -------
+        open3d.geometry.PointCloud
+            Unconnected scans are left out.
+        """
+        if len(clouds) != len(self.poses):
+            raise ValueError(f"{len(self.poses)} scans were registered, got {len(clouds)}")
+        merged = o3d.geometry.PointCloud()
+        for k, (scan, pose) in enumerate(zip(clouds, self.poses, strict=True)):
+            if pose is None:
+                continue
+            part = o3d.geometry.PointCloud(to_point_cloud(scan, f"clouds[{k}]").points)
+            part.transform(pose)
+            if colour:
+                part.paint_uniform_color(SCAN_COLOURS[k % len(SCAN_COLOURS)])
+            merged += part
+        return merged.voxel_down_sample(voxel_size or self.voxel_size / 2)
+
+    def mesh(
+        self, clouds: list[Any], *, voxel_size: float | None = None, depth: int = 9
+    ) -> o3d.geometry.TriangleMesh:
+        """A surface through the merged scans: Open3D's screened Poisson reconstruction.
+
+        Normals are estimated within 4 voxels of the merged cloud and oriented
+        consistently over their tangent planes before meshing.
+
+        Parameters
+        ----------
+        clouds : list
+            As in :meth:`merge`.
+        voxel_size : float, default=None
+            As in :meth:`merge`.
+        depth : int, default=9
+            Octree depth of the Poisson solver (detail, and memory).
+
+        Returns
+        -------
+        open3d.geometry.TriangleMesh
+        """
+        merged = self.merge(clouds, voxel_size=voxel_size, colour=False)
+        voxel = voxel_size or self.voxel_size / 2
+        merged.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=30))
+        merged.orient_normals_consistent_tangent_plane(16)
+        mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(merged, depth=depth)
+        return mesh
+
+    def as_dict(self, names: list[str] | None = None) -> dict:
+        """JSON-ready poses, edges and flags, scans called by ``names`` (default: their
+        indices)."""
+        names = names or [str(k) for k in range(len(self.poses))]
+        return {
+            "scans": list(names),
+            "poses": [None if p is None else p.tolist() for p in self.poses],
+            "unconnected": [names[k] for k in self.unconnected],
+            "edges": [[names[i], names[j]] for i, j in self.edges],
+            "voxel_size": self.voxel_size,
+            "seconds": self.seconds,
+        }
 
 
 def _common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
@@ -270,6 +363,19 @@ def _optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettin
     return graph, optimised, kept
 
 
+@validate_params(
+    {
+        "clouds": [list, tuple],
+        "descriptor": [None, HasMethods(["transform"])],
+        "n_global_points": [Interval(Integral, 3, None, closed="left")],
+        "min_fitness": [Interval(Real, 0, 1, closed="right")],
+        "n_jobs": [None, Integral],
+        "progress": [None, "boolean"],
+        "seed": [Interval(Integral, 0, None, closed="left")],
+        "settings": [None, RegistrationSettings],
+    },
+    prefer_skip_nested_validation=False,  # the descriptor is the caller's, checked by itself
+)
 def register_multiway(
     clouds: list[Any],
     descriptor: Any = None,
@@ -316,18 +422,11 @@ def register_multiway(
         For fewer than two clouds, or a cloud that is not a valid point cloud.
     """
     start = time.perf_counter()
-    if not isinstance(clouds, (list, tuple)) or len(clouds) < 2:
-        raise ValueError(
-            "register_multiway needs a list of at least two clouds, got "
-            f"{len(clouds) if isinstance(clouds, (list, tuple)) else type(clouds).__name__}"
-        )
-    if not 0.0 < min_fitness <= 1.0:
-        raise ValueError(f"min_fitness must be in (0, 1], got {min_fitness!r}")
+    if len(clouds) < 2:
+        raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
     voxel = _common_voxel(points, n_global_points)
-    if settings is not None and not isinstance(settings, RegistrationSettings):
-        raise ValueError(f"settings must be a RegistrationSettings, got {settings!r}")
     settings = (settings or RegistrationSettings()).at(voxel)
     prepared = parallel_map(
         _prepare,

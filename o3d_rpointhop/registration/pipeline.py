@@ -125,6 +125,7 @@ class RegistrationPipeline(_BaseComposition):
     def __init__(
         self,
         steps: list[tuple[str, RegistrationStep]],
+        *,
         descriptor: Any = None,
         voxel_size: float | str = "auto",
         n_global_points: int | str = "auto",

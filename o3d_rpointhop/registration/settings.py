@@ -76,6 +76,7 @@ class RegistrationSettings:
     """
 
     voxel_size: float | None = None
+    _: dataclasses.KW_ONLY
     ransac_factor: float = 1.5
     fgr_factor: float = 1.0
     evaluation_factor: float = 1.0

@@ -6,8 +6,8 @@ computed once per cloud by :func:`build_geometry` and reduced to
 
 * the hop-1 attributes: octant means of the neighbours' coordinates (24-D), and with
   the scene variant's ``attributes`` also of their normals and eigenvalue features
-  (:mod:`o3d_rpointhop._attributes`), and
-* for every later hop, an :class:`~o3d_rpointhop._octants.OctantPooling` operator that
+  (:mod:`._attributes`), and
+* for every later hop, an :class:`~._octants.OctantPooling` operator that
   maps the previous hop's per-point features to the octant means of each query's
   neighbourhood.
 
@@ -17,8 +17,8 @@ products, used both when fitting (hop by hop over all clouds) and when transform
 Hop ``h`` (1-based) takes its queries from the sample ``S_h`` and its neighbours from
 ``S_{h-1}``, where ``S_0`` is the whole cloud and ``S_h`` is a sample of size
 ``hop_sizes[h-1]`` drawn from ``S_{h-1}`` (farthest points for clouds of up to
-:data:`~o3d_rpointhop._sampling.FPS_MAX_POINTS` points, Poisson disks above; see
-:mod:`o3d_rpointhop._sampling`). When transforming, the last hop takes every input point as
+:data:`~._sampling.FPS_MAX_POINTS` points, Poisson disks above; see
+:mod:`._sampling`). When transforming, the last hop takes every input point as
 a query, so every point gets a descriptor.
 """
 

@@ -12,10 +12,9 @@ mean, empty octants included), so any per-output constant only moves every final
 descriptor by one constant vector, which no distance, nearest-neighbour search or PCA
 sees. We therefore subtract each output's training mean instead of adding ``b``: the
 outputs are centred, and float32 features keep their full precision relative to their
-spread rather than to a large offset. The paper's ``b`` is still reported
-(:attr:`SaabKernels.paper_bias`).
+spread rather than to a large offset.
 
-Fitting only needs each channel's mean, covariance and largest norm, which
+Fitting only needs each channel's mean and covariance, which
 :class:`MomentAccumulator` gathers from batches of samples, so fitting memory does not
 grow with the number of training clouds.
 """

@@ -54,6 +54,7 @@ class FGRGlobal(GlobalStep):
     def __init__(
         self,
         descriptor: Any = None,
+        *,
         max_correspondence_distance: float | None = None,
         mutual_filter: bool = True,
         tuple_test: bool = True,

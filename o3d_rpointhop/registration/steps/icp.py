@@ -154,6 +154,7 @@ class PointToPointICP(_ICPStep):
     def __init__(
         self,
         max_correspondence_distance: float | list[float] | None = None,
+        *,
         max_iteration: int = 50,
         relative_fitness: float = 1e-6,
         relative_rmse: float = 1e-6,
@@ -197,6 +198,7 @@ class PointToPlaneICP(_ICPStep):
     def __init__(
         self,
         max_correspondence_distance: float | list[float] | None = None,
+        *,
         max_iteration: int = 50,
         kernel: str | None = None,
         kernel_scale: float | None = None,
@@ -249,6 +251,7 @@ class GeneralizedICP(_ICPStep):
     def __init__(
         self,
         max_correspondence_distance: float | list[float] | None = None,
+        *,
         max_iteration: int = 50,
         epsilon: float = 1e-3,
         kernel: str | None = None,
@@ -307,6 +310,7 @@ class MultiScaleICP(RegistrationStep):
     def __init__(
         self,
         scales=(4.0, 2.0, 1.0),
+        *,
         max_iteration=(50, 30, 20),
         method: str = "point_to_plane",
         distance_factor: float = 2.0,

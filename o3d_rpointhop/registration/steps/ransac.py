@@ -66,6 +66,7 @@ class RANSACGlobal(GlobalStep):
     def __init__(
         self,
         descriptor: Any = None,
+        *,
         max_correspondence_distance: float | None = None,
         mutual_filter: bool = False,
         max_ratio: float | None = None,

@@ -48,6 +48,7 @@ class SVDGlobal(GlobalStep):
     def __init__(
         self,
         descriptor: Any = None,
+        *,
         top_k: int | float = 0.25,
         top_k_ratio: int | float = 0.125,
         mutual_filter: bool = False,

@@ -90,6 +90,7 @@ class SymmetryCheck(RegistrationStep):
     def __init__(
         self,
         refine: RegistrationStep | None = None,
+        *,
         max_correspondence_distance: float | None = None,
         margin: float = 0.1,
     ) -> None:

@@ -1,4 +1,4 @@
-"""SymmetryCheck: 180-degree twins of an estimate, and choosing the best-fitting one."""
+"""SymmetryCheck: an estimate's 180-degree twins."""
 
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
-"""RPointHopTransformer as a scikit-learn estimator."""
+"""RPointHopTransformer under scikit-learn's estimator contract."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import NOT_APPLICABLE, assert_passes_check_estimator
+from helpers import NOT_APPLICABLE, assert_passes_check_estimator
 from sklearn.base import clone
 from sklearn.decomposition import PCA
 from sklearn.exceptions import NotFittedError

@@ -1,19 +1,17 @@
-"""The scene variant's point attributes: normals in the LRF and eigenvalue features."""
+"""The scene variant: normals and eigenvalue features pooled with the coordinates."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import random_motion, relative_difference
+from helpers import SMALL, random_motion, relative_difference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import make_object, make_room
-from o3d_rpointhop.descriptors.pointhop._attributes import check_attributes, eigen_features
 
 SCENE = ("xyz", "normal", "eigen")
-SMALL = dict(n_neighbors=(16, 16), hop_sizes=(1.0, 0.5), lrf_neighbors=32)
 
 
 def _room(n: int = 3000, seed: int = 0) -> np.ndarray:
@@ -26,28 +24,6 @@ def _room(n: int = 3000, seed: int = 0) -> np.ndarray:
 def scene_model():
     clouds = [make_object(1200, shape_seed=s) for s in range(4)] + [_room(1600, 1)]
     return RPointHopTransformer(attributes=SCENE, random_state=0, **SMALL).fit(clouds)
-
-
-def test_eigen_features_of_known_shapes():
-    out = eigen_features(np.array([[1.0, 0, 0], [1, 1, 0], [1, 1, 1], [0, 0, 0], [2, 1, 0.5]]))
-    line, plane, ball, point, general = out
-    np.testing.assert_allclose(line, [1, 0, 0, 0, 1, 0, 0], atol=1e-12)
-    np.testing.assert_allclose(plane, [0, 1, 0, 0, 1, np.log(2), 0], atol=1e-12)
-    np.testing.assert_allclose(ball, [0, 0, 1, 1 / 3, 0, np.log(3), 1 / 3], atol=1e-12)
-    np.testing.assert_array_equal(point, np.zeros(7))
-    e = np.array([2, 1, 0.5]) / 3.5
-    assert general[3] == pytest.approx(np.cbrt(e.prod()))
-    assert general[5] == pytest.approx(-(e * np.log(e)).sum())
-    # Scale-free: the same shape at any size has the same features.
-    np.testing.assert_allclose(eigen_features(np.array([[2e6, 1e6, 5e5]]))[0], general)
-
-
-def test_attribute_names_are_checked():
-    assert check_attributes("xyz") == ("xyz",)
-    assert check_attributes(["xyz", "eigen"]) == ("xyz", "eigen")
-    for bad in [(), ("normal",), ("xyz", "xyz"), ("xyz", "colour"), 3]:
-        with pytest.raises(ValueError, match="attributes"):
-            RPointHopTransformer(attributes=bad).fit(make_object(300))
 
 
 def test_scene_model_layout(scene_model):

@@ -1,4 +1,4 @@
-"""Where the datasets are looked for: the documented order."""
+"""Where the real data is looked for."""
 
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
-"""Registration as scikit-learn composition: nested parameters, model selection, settings."""
+"""Registration as scikit-learn composition: nested parameters, model selection."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import random_motion
+from helpers import object_pairs
 from sklearn.base import clone
 from sklearn.frozen import FrozenEstimator
 from sklearn.model_selection import GridSearchCV
@@ -14,26 +14,10 @@ from o3d_rpointhop import (
     PointToPlaneICP,
     RANSACGlobal,
     RegistrationPipeline,
-    RegistrationSettings,
     RPointHopTransformer,
-    register,
     registration_scorer,
 )
-from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.transforms import apply_transform
-
-
-def _pairs(n: int, seed: int = 0):
-    """Pairs of different samples of one object, moved apart over SO(3), with the truth."""
-    X, y = [], []
-    for k in range(n):
-        target = make_object(700, shape_seed=40 + k, sample_seed=1)
-        rot, shift = random_motion(seed * 10 + k, 0.3)
-        truth = np.eye(4)
-        truth[:3, :3], truth[:3, 3] = rot.T, -rot.T @ shift
-        X.append((make_object(700, shape_seed=40 + k, sample_seed=2) @ rot.T + shift, target))
-        y.append(truth)
-    return X, np.array(y)
 
 
 def _pipeline(descriptor=None) -> RegistrationPipeline:
@@ -63,7 +47,7 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
 
 
 def test_grid_search_over_descriptor_and_step_parameters():
-    X, y = _pairs(4)
+    X, y = object_pairs(4)
     search = GridSearchCV(
         _pipeline(FPFHTransformer(normal_radius="auto")),
         # A histogram radius far below the point spacing leaves FPFH empty: no pair can
@@ -87,7 +71,7 @@ def test_grid_search_over_descriptor_and_step_parameters():
 
 
 def test_fit_predict_score():
-    X, y = _pairs(2, seed=1)
+    X, y = object_pairs(2, seed=1)
     pipe = _pipeline(FPFHTransformer(radius="auto", normal_radius="auto"))
     with pytest.raises(Exception, match="not fitted"):
         pipe.predict(X)
@@ -108,44 +92,7 @@ def test_fit_predict_score():
 
 def test_frozen_pretrained_descriptor_is_kept_by_fit():
     model = RPointHopTransformer.pretrained(n_components=32)
-    X, _ = _pairs(1)
+    X, _ = object_pairs(1)
     pipe = _pipeline(FrozenEstimator(model)).fit(X)
     cloud = X[0][1]
     np.testing.assert_array_equal(pipe.descriptor_.transform(cloud), model.transform(cloud))
-
-
-def test_settings_set_every_derived_distance():
-    X, _ = _pairs(1)
-    source, target = X[0]
-    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
-    plain = register(source, target, fpfh)
-    voxel = plain.voxel_size
-    assert plain.steps[0].info["max_correspondence_distance"] == pytest.approx(1.5 * voxel)
-    assert plain.steps[1].info["max_correspondence_distance"] == pytest.approx(
-        [2.0 * voxel, 0.5 * voxel]
-    )
-    settings = RegistrationSettings(ransac_factor=3.0, icp_factors=(4.0, 1.0, 0.25))
-    custom = register(source, target, fpfh, settings=settings)
-    assert custom.voxel_size == voxel
-    assert custom.steps[0].info["max_correspondence_distance"] == pytest.approx(3.0 * voxel)
-    assert custom.steps[1].info["max_correspondence_distance"] == pytest.approx(
-        [4.0 * voxel, voxel, 0.25 * voxel]
-    )
-    assert custom.distance == pytest.approx(0.25 * voxel)
-    # A step's own value still wins over the settings.
-    ransac = RANSACGlobal(max_correspondence_distance=0.05)
-    own = register(source, target, fpfh, global_method=ransac)
-    assert own.steps[0].info["max_correspondence_distance"] == 0.05
-
-
-def test_settings_are_checked():
-    with pytest.raises(ValueError, match="ransac_factor must be a positive number"):
-        RegistrationSettings(ransac_factor=0.0)
-    with pytest.raises(ValueError, match="icp_factors must be a non-empty tuple"):
-        RegistrationSettings(icp_factors=())
-    with pytest.raises(ValueError, match="no resolution yet"):
-        _ = RegistrationSettings().ransac_distance
-    with pytest.raises(ValueError, match="'settings' parameter"):
-        register(make_object(300), make_object(300), settings={"ransac_factor": 2.0})
-    bound = RegistrationSettings(normal_radius_factor=3.0).at(0.5)
-    assert bound.normal_radius == 1.5 and bound.feature_radius == 2.5

@@ -1,11 +1,11 @@
-"""FPFHTransformer: the FPFH peer behind the transformer interface."""
+"""FPFHTransformer: Open3D's FPFH behind the descriptor interface."""
 
 from __future__ import annotations
 
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import NOT_APPLICABLE, assert_passes_check_estimator
+from helpers import NOT_APPLICABLE, assert_passes_check_estimator
 from sklearn.base import clone
 
 from o3d_rpointhop import FPFHTransformer
@@ -19,6 +19,14 @@ def _reference(points, radius=0.25, normal_radius=0.1):
         pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=100)
     )
     return np.asarray(feature.data).T
+
+
+# FPFH learns nothing and transforms without fit, so sklearn also runs its stateless
+# check, which feeds 5 columns like the others listed.
+FPFH_NOT_APPLICABLE = {
+    **NOT_APPLICABLE,
+    "check_transformers_unfitted_stateless": NOT_APPLICABLE["check_n_features_in"],
+}
 
 
 def test_matches_open3d_and_needs_no_fit():
@@ -76,14 +84,6 @@ def test_bad_input():
         FPFHTransformer().transform(np.full((50, 3), np.nan))
     with pytest.raises(ValueError, match="no spatial extent"):
         FPFHTransformer(radius="auto").transform(np.zeros((50, 3)))
-
-
-# FPFH learns nothing and transforms without fit, so sklearn also runs its stateless
-# check, which feeds 5 columns like the others listed.
-FPFH_NOT_APPLICABLE = {
-    **NOT_APPLICABLE,
-    "check_transformers_unfitted_stateless": NOT_APPLICABLE["check_n_features_in"],
-}
 
 
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")

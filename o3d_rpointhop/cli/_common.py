@@ -1,0 +1,139 @@
+"""What every command shares: exit statuses, the one-line error, options declared once,
+and the model and descriptor a command is given."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..descriptors import PRETRAINED_MODELS
+
+PROG = "o3d-rpointhop"
+
+#: Exit statuses (listed in ``--help``).
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_UNRELIABLE = 0, 1, 2, 3
+EXIT_CODES = f"""exit status:
+  {EXIT_OK}  success
+  {EXIT_ERROR}  error: a missing, empty, damaged or unreadable file, a directory given as a
+     file, NaN coordinates, too few points, degenerate geometry, an output that exists
+     as a folder or exceeds the size limit without --force; one line on stderr says which
+     (--debug shows the traceback instead)
+  {EXIT_USAGE}  usage error (unknown option, bad value)
+  {EXIT_UNRELIABLE}  register/demo finished, but the result is flagged: not converged (no
+     overlap, or a chance alignment) or ambiguous (a symmetric shape); reconstruct
+     finished with unconnected scans left out; outputs are written, and stderr says
+     which"""
+#: Largest output written without --force.
+MAX_OUTPUT_BYTES = 512 * 1024**2
+#: What ``--descriptor`` names.
+DESCRIPTORS = ("rpointhop", "fpfh")
+
+
+class CommandError(Exception):
+    """A failure to report as one line on stderr with exit status 1."""
+
+
+def check_size(path: str, nbytes: int, force: bool) -> None:
+    """Refuse an output over :data:`MAX_OUTPUT_BYTES` unless ``force``."""
+    if nbytes > MAX_OUTPUT_BYTES and not force:
+        raise CommandError(
+            f"{path}: would write {nbytes / 1024**2:,.0f} MB (limit {MAX_OUTPUT_BYTES // 1024**2} "
+            "MB without --force); pass --force, or shorten the descriptor with --n-components"
+        )
+
+
+def auto_or(convert, what: str, valid, problem: str):
+    """An argparse type: ``"auto"``, or ``convert(text)`` when ``valid`` accepts it."""
+
+    def parse(text: str):
+        if text == "auto":
+            return text
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected 'auto' or {what}, got {text!r}") from None
+        if not valid(value):
+            raise argparse.ArgumentTypeError(f"{problem}, got {text!r}")
+        return value
+
+    return parse
+
+
+# --------------------------------------------------------------------------- options
+def add_model(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--model``: a model file, or a shipped model by name."""
+    parser.add_argument(
+        "--model",
+        help=f"R-PointHop model file written by 'fit', or a shipped model: "
+        f"{', '.join(PRETRAINED_MODELS)} (default: {default})",
+    )
+
+
+def add_descriptor(parser: argparse.ArgumentParser) -> None:
+    """``--descriptor``: R-PointHop (``--model``) or FPFH."""
+    parser.add_argument(
+        "--descriptor",
+        choices=DESCRIPTORS,
+        default=DESCRIPTORS[0],
+        help="rpointhop (the model of --model) or fpfh (radii from the point spacing)",
+    )
+
+
+def add_data(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--data", help="data folder (default: data_home(), docs/datasets.md)")
+
+
+def add_seed(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--seed", type=int, default=0, help="seeds every random choice")
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print the full result as JSON")
+
+
+# --------------------------------------------------------------------------- inputs
+def load_model(name: str | None, n_components: int | None = None):
+    """A model file, a shipped model by name, else the pretrained ModelNet40 model; on
+    ``n_components`` axes when given (a shipped model otherwise comes as
+    ``pretrained(name)`` gives it)."""
+    from ..descriptors import RPointHopTransformer
+
+    if name is None or name in PRETRAINED_MODELS:
+        return RPointHopTransformer.pretrained(
+            name or "modelnet40", n_components="default" if n_components is None else n_components
+        )
+    model = RPointHopTransformer.load(name)
+    if n_components is not None:
+        model.set_params(n_components=n_components)
+    return model
+
+
+def descriptor_of(args: argparse.Namespace):
+    """The descriptor ``--descriptor`` and ``--model`` name; ``None`` leaves the choice
+    to the library (its default descriptor)."""
+    from ..descriptors import FPFHTransformer
+
+    if args.descriptor == "fpfh":
+        if getattr(args, "model", None):
+            raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
+        return FPFHTransformer(radius="auto", normal_radius="auto")
+    return load_model(args.model) if getattr(args, "model", None) else None
+
+
+def flag_status(result) -> int:
+    """Exit status of a finished registration: 3, with a line on stderr, when flagged."""
+    if not result.converged:
+        print(
+            f"{PROG}: warning: the result did not converge (fitness {result.fitness:.3f}): "
+            "no overlap, or a chance alignment",
+            file=sys.stderr,
+        )
+        return EXIT_UNRELIABLE
+    if result.ambiguous:
+        print(
+            f"{PROG}: warning: the result is ambiguous: turned by 180 degrees it fits about "
+            "as well (a symmetric shape or a featureless plane)",
+            file=sys.stderr,
+        )
+        return EXIT_UNRELIABLE
+    return EXIT_OK

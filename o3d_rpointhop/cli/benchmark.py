@@ -1,0 +1,103 @@
+"""``o3d-rpointhop benchmark``: the registration benchmarks, in one run per dataset."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ._common import EXIT_OK, CommandError, add_data, add_model, add_seed, load_model
+
+
+def add_parser(commands) -> None:
+    from ..evaluation.bunny import BUNNY_PROTOCOLS
+    from ..evaluation.methods import DATASETS
+    from ..evaluation.modelnet40 import MODELNET40_PROTOCOLS
+    from ..evaluation.multiway import OBJECTS
+
+    p = commands.add_parser(
+        "benchmark",
+        help="registration benchmarks against the paper and FPFH (JSON, markdown, PNG)",
+        description="Run every method on the dataset's protocols in one run and write "
+        "<output>/<dataset>.json, .md and .png. ModelNet40 protocols: "
+        f"{', '.join(MODELNET40_PROTOCOLS)}; bunny: {', '.join(BUNNY_PROTOCOLS)}; "
+        f"multiway: {', '.join(OBJECTS)} (every scan from an unknown pose, rebuilt with "
+        "register_multiway).",
+    )
+    p.add_argument("dataset", choices=[*DATASETS, "multiway"])
+    p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
+    p.add_argument(
+        "--methods",
+        help="comma-separated methods (default: the dataset's own set, listed in "
+        "docs/benchmarks.md)",
+    )
+    add_data(p)
+    p.add_argument("--output", default="benchmark_results", help="where results go")
+    add_seed(p)
+    p.add_argument("--max-shapes", type=int, help="ModelNet40: use only the first N test shapes")
+    p.add_argument(
+        "--max-pairs", type=int, help="3DMatch: a seeded sample of N pairs per benchmark"
+    )
+    p.add_argument(
+        "--scenes", help="3DMatch: comma-separated scene names (or parts of them) to keep"
+    )
+    add_model(p, default="register()'s default, the ModelNet40 model on 128 axes")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..evaluation.bunny import run_bunny
+    from ..evaluation.methods import default_methods
+    from ..evaluation.modelnet40 import MODELNET40_PROTOCOLS, run_modelnet40
+    from ..evaluation.report import markdown, write_report
+    from ..evaluation.threedmatch import run_3dmatch
+    from ..registration.defaults import default_descriptor
+
+    if args.dataset == "multiway":
+        return _multiway(args)
+    methods = args.methods.split(",") if args.methods else default_methods(args.dataset)
+    model = load_model(args.model) if args.model else default_descriptor()
+    common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
+    if args.dataset == "modelnet40":
+        protocols = args.protocol or list(MODELNET40_PROTOCOLS)
+        results = run_modelnet40(protocols, methods, max_shapes=args.max_shapes, **common)
+    elif args.dataset == "bunny":
+        results = run_bunny(args.protocol or ["scans", "paper"], methods, **common)
+    else:
+        if args.protocol:
+            raise CommandError("3dmatch has no protocols to choose")
+        scenes = args.scenes.split(",") if args.scenes else None
+        results = run_3dmatch(methods, max_pairs=args.max_pairs, scenes=scenes, **common)
+    paths = write_report(results, args.output)
+    print(markdown(results))  # with the timings: the terminal is not a result file
+    print("written: " + ", ".join(paths))
+    return EXIT_OK
+
+
+def _multiway(args: argparse.Namespace) -> int:
+    from ..evaluation.multiway import (
+        OBJECTS,
+        markdown,
+        plot_reconstruction,
+        run_multiway,
+        timings_markdown,
+    )
+    from ..evaluation.report import write_split
+
+    objects = args.protocol or list(OBJECTS)
+    unknown = [o for o in objects if o not in OBJECTS]
+    if unknown:
+        raise CommandError(f"multiway objects are {list(OBJECTS)}, got {unknown}")
+    run = run_multiway(objects, data=args.data, seed=args.seed)
+    folder = Path(args.output)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, entry in run.results["objects"].items():
+        for method in entry["methods"]:
+            path = folder / f"multiway_{name}_{method}.png"
+            plot_reconstruction(run, name, method, path, f"{name}: {method}, scans by colour")
+            written.append(str(path))
+    files = write_split(run.results, folder, "multiway", markdown, timings_markdown)
+    print(markdown(run.results))
+    print("written: " + ", ".join([*files, *written]))
+    return EXIT_OK

@@ -1,0 +1,52 @@
+"""``o3d-rpointhop describe``: one descriptor per point of a cloud, to a ``.npy`` file."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from ._common import EXIT_OK, MAX_OUTPUT_BYTES, add_model, check_size, load_model
+
+
+def add_parser(commands) -> None:
+    p = commands.add_parser("describe", help="write one descriptor per point of a cloud (.npy)")
+    p.add_argument("cloud")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="descriptor file to write (.npy format, this exact path)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help=f"write outputs over {MAX_OUTPUT_BYTES // 1024**2} MB (a 1624-D descriptor is "
+        "6.5 kB a point)",
+    )
+    add_model(p, default="modelnet40")
+    p.add_argument(
+        "--n-components",
+        type=int,
+        help="project the descriptors on this many principal axes (pretrained: up to 128)",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..io import check_output_path, read_cloud, save_npy
+
+    check_output_path(args.output)
+    cloud = read_cloud(args.cloud)
+    model = load_model(args.model, args.n_components)
+    # 4 bytes a value, plus the header: refuse before spending the time.
+    check_size(args.output, 4 * len(cloud.points) * model.n_features_out_, args.force)
+    start = time.perf_counter()
+    desc = model.set_params(progress=None).transform(cloud)
+    save_npy(args.output, np.ascontiguousarray(desc))
+    print(
+        f"{len(desc)} points described ({desc.shape[1]}-D) in "
+        f"{time.perf_counter() - start:.3f} s, written to {args.output}"
+    )
+    return EXIT_OK

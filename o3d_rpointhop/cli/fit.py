@@ -1,0 +1,68 @@
+"""``o3d-rpointhop fit``: fit an R-PointHop model on point cloud files."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from ._common import EXIT_OK
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated ints, got {text!r}") from None
+
+
+def _sizes(text: str) -> tuple[float | int, ...]:
+    try:
+        values = [float(v) if "." in v else int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated fractions or counts, got {text!r}"
+        ) from None
+    return tuple(values)
+
+
+#: Options that become RPointHopTransformer parameters of the same name.
+_PARAMETERS = (
+    "n_neighbors",
+    "hop_sizes",
+    "lrf_neighbors",
+    "energy_threshold",
+    "fit_subsample",
+    "n_jobs",
+    "random_state",
+)
+
+
+def add_parser(commands) -> None:
+    p = commands.add_parser("fit", help="fit an R-PointHop model on point cloud files")
+    p.add_argument("clouds", nargs="+", help="training clouds (.ply, .pcd, .xyz, .npy, ...)")
+    p.add_argument("-o", "--output", required=True, help="model file to write (.npz)")
+    p.add_argument("--n-neighbors", type=_ints, help="per hop, e.g. 64,32,48,48")
+    p.add_argument("--hop-sizes", type=_sizes, help="per hop, e.g. 1.0,0.75,0.5,0.375")
+    p.add_argument("--lrf-neighbors", type=int)
+    p.add_argument("--energy-threshold", type=float)
+    p.add_argument("--fit-subsample", type=int)
+    p.add_argument("--n-jobs", type=int)
+    p.add_argument("--random-state", type=int)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..descriptors import RPointHopTransformer
+    from ..io import check_output_path, read_cloud
+
+    check_output_path(args.output)
+    clouds = [read_cloud(p) for p in args.clouds]
+    params = {name: getattr(args, name) for name in _PARAMETERS if getattr(args, name) is not None}
+    start = time.perf_counter()
+    model = RPointHopTransformer(**params).fit(clouds)
+    model.save(args.output)
+    print(
+        f"fitted on {len(clouds)} clouds in {time.perf_counter() - start:.2f} s: "
+        f"{model.n_features_out_}-D descriptors, model written to {args.output}"
+    )
+    return EXIT_OK

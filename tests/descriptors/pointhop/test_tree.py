@@ -1,0 +1,90 @@
+"""The fitted hop tree: fitting (cached and streamed), threads, chunks, BLAS kept to one
+thread."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import o3d_rpointhop.descriptors.pointhop._geometry as hops
+import o3d_rpointhop.descriptors.pointhop._octants as octants
+import o3d_rpointhop.descriptors.pointhop._tree as tree_module
+from o3d_rpointhop import RPointHopTransformer
+from o3d_rpointhop.datasets import make_blob
+
+
+# ----------------------------------------------------------------------------- determinism
+def test_fit_is_deterministic_and_n_jobs_independent(train_clouds, cloud):
+    a = RPointHopTransformer(random_state=0).fit(train_clouds)
+    b = RPointHopTransformer(random_state=0, n_jobs=2).fit(train_clouds)
+    for ka, kb in zip(a.kernels_, b.kernels_, strict=True):
+        np.testing.assert_array_equal(ka, kb)
+    np.testing.assert_array_equal(a.transform(cloud), b.transform(cloud))
+    lists = b.transform([cloud, cloud + 1.0])
+    np.testing.assert_array_equal(lists[1], a.transform(cloud + 1.0))
+
+
+def test_streaming_fit_equals_cached_fit(train_clouds, monkeypatch):
+    """With no memory for caching, every hop recomputes the clouds: same model."""
+    cached = RPointHopTransformer().fit(train_clouds)
+    monkeypatch.setattr(tree_module, "FIT_CACHE_BYTES", 0)
+    streamed = RPointHopTransformer().fit(train_clouds)
+    for a, b in zip(cached.kernels_, streamed.kernels_, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
+    for a, b in zip(cached.selected_, streamed.selected_, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_transform_in_a_forked_child_after_the_parent_used_its_threads(fitted, cloud):
+    """The pooling threads do not survive a fork; a forked child must start its own
+    instead of waiting forever on the parent's."""
+    import multiprocessing
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    expected = fitted.transform(cloud)  # the parent's thread pool now exists
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        result = pool.apply_async(fitted.transform, (cloud,)).get(timeout=60)
+    np.testing.assert_array_equal(result, expected)
+
+
+def test_transform_keeps_blas_to_one_thread(fitted, cloud, monkeypatch):
+    """No hidden pool: BLAS runs on one thread inside the transform, and the caller's
+    setting is back afterwards."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    module = tree_module
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    seen = []
+    original = module.apply_saab
+
+    def spy(*args):
+        seen.append(blas_threads())
+        return original(*args)
+
+    monkeypatch.setattr(module, "apply_saab", spy)
+    with threadpool_limits(2, user_api="blas"):
+        before = blas_threads()
+        fitted.transform(cloud)
+        assert blas_threads() == before
+    assert seen and all(s <= {1} for s in seen)
+
+
+# ----------------------------------------------------------------------------- chunks
+def test_chunked_equals_unchunked(fitted, monkeypatch):
+    cloud = make_blob(900, shape_seed=11)
+    whole = fitted.transform(cloud)
+    monkeypatch.setattr(hops, "GEOMETRY_CHUNK", 97)
+    monkeypatch.setattr(octants, "BUILD_CHUNK", 61)
+    np.testing.assert_array_equal(fitted.transform(cloud), whole)
+
+
+def test_threads_give_the_same_descriptors(fitted, monkeypatch):
+    cloud = make_blob(900, shape_seed=12)
+    one = fitted.transform(cloud)
+    monkeypatch.setattr(octants, "_BLOCKS_PER_THREAD", 1)  # threads even on a small cloud
+    np.testing.assert_array_equal(fitted.set_params(n_jobs=2).transform(cloud), one)
+    fitted.set_params(n_jobs=None)

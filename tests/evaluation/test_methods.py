@@ -1,0 +1,68 @@
+"""The benchmark method registry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from o3d_rpointhop import (
+    RPointHopTransformer,
+)
+from o3d_rpointhop.evaluation.methods import METHODS, check_methods, default_methods, run_method
+from o3d_rpointhop.evaluation.metrics import (
+    pair_errors,
+)
+from o3d_rpointhop.evaluation.protocols import make_pairs
+
+
+def test_scene_only_methods_are_refused_on_objects():
+    assert METHODS["rpointhop-loso"].datasets == {"3dmatch"}
+    for objects in ("modelnet40", "bunny"):
+        assert not {"rpointhop-loso", "rpointhop-scene"} & set(default_methods(objects))
+        with pytest.raises(ValueError, match=r"do not apply to .* \(only to 3dmatch\)"):
+            check_methods(["icp", "rpointhop-loso"], objects)
+    assert {"rpointhop-scene", "rpointhop-loso", "fpfh-ransac-icp-5cm"} <= set(
+        default_methods("3dmatch")
+    )
+    assert check_methods(["rpointhop-loso"], "3dmatch") == ["rpointhop-loso"]
+    with pytest.raises(ValueError, match="unknown methods"):
+        check_methods(["magic"], "3dmatch")
+
+
+def test_default_method_sets_are_the_committed_ones():
+    """The committed result files hold these methods, in this order."""
+    objects = [
+        "rpointhop-svd",
+        "rpointhop-svd-icp",
+        "rpointhop-ransac",
+        "rpointhop-ransac-icp",
+        "rpointhop-ransac-icp-sym",
+        "fpfh-ransac",
+        "fpfh-fgr",
+        "fpfh-ransac-icp",
+        "fpfh-pipeline-ransac-icp",
+        "rpointhop-open3d-ransac-icp",
+        "icp",
+    ]
+    assert default_methods("modelnet40") == default_methods("bunny") == objects
+
+
+def test_every_method_runs(shapes):
+
+    model = RPointHopTransformer().fit(list(shapes[:, :1024]))
+    (pair,) = make_pairs(shapes[:1], "paper", seed=0)
+    for name in METHODS:
+        estimate, seconds = run_method(name, pair.source, pair.target, descriptor=model, voxel=0.05)
+        rotation = estimate[:3, :3]
+        assert estimate.shape == (4, 4) and np.isfinite(seconds)
+        np.testing.assert_allclose(rotation.T @ rotation, np.eye(3), atol=1e-9)  # rigid
+        assert np.linalg.det(rotation) == pytest.approx(1.0) and estimate[3].tolist() == [
+            0,
+            0,
+            0,
+            1,
+        ]
+        if name != "icp":  # a moved copy: every global method must find it
+            assert pair_errors(estimate, pair.truth)["rotation_error_deg"] < 2.0, name
+    with pytest.raises(ValueError, match="unknown method"):
+        run_method("magic", pair.source, pair.target, descriptor=model, voxel=0.05)

@@ -1,0 +1,79 @@
+"""Descriptor matches: nearest, mutual, ratio test, top-k."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from o3d_rpointhop import (
+    find_correspondences,
+)
+
+
+# ----------------------------------------------------------------------------- correspondences
+def test_nearest_and_mutual_matches():
+    rng = np.random.default_rng(0)
+    feats = rng.normal(size=(100, 16))
+    perm = rng.permutation(100)
+    corr = find_correspondences(feats[perm], feats)
+    np.testing.assert_array_equal(corr.pairs[:, 1], perm)  # exact descriptors: exact matches
+    np.testing.assert_array_equal(corr.pairs[:, 0], np.arange(100))
+    np.testing.assert_allclose(corr.distances, 0.0, atol=1e-5)
+
+    # A target with one extra near-duplicate: only one of the two can be mutual.
+    tgt = np.r_[feats, feats[:1] + 1e-3]
+    src = np.r_[feats, feats[:1] + 2e-3]
+    mutual = find_correspondences(src, tgt, mutual_filter=True)
+    assert len(mutual) == 100 and len(find_correspondences(src, tgt)) == 101
+
+
+@pytest.mark.parametrize("n_refs, k", [(300, 1), (300, 2), (300, 3), (4, 2), (2, 2)])
+def test_nearest_descriptors_are_the_exact_neighbours(n_refs, k):
+    from scipy.spatial.distance import cdist
+
+    from o3d_rpointhop.registration.correspondences import nearest_descriptors
+
+    rng = np.random.default_rng(n_refs + k)
+    refs = rng.normal(size=(n_refs, 24)).astype(np.float32)
+    queries = np.r_[rng.normal(size=(150, 24)), refs[:5]].astype(np.float32)
+    indices, distances = nearest_descriptors(queries, refs, k=k)
+    exact = cdist(queries.astype(np.float64), refs.astype(np.float64))
+    expected = np.sort(exact, axis=1)[:, :k]
+    assert indices.shape == (len(queries), min(k, n_refs))
+    np.testing.assert_allclose(distances, expected[:, : indices.shape[1]], atol=1e-5)
+    np.testing.assert_allclose(
+        np.take_along_axis(exact, indices, axis=1), distances, atol=1e-5
+    )  # each index is at its distance
+
+
+def test_ratio_and_top_k_filters_follow_the_paper():
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(200, 8))
+    tgt = src + rng.normal(scale=0.3, size=src.shape)
+    full = find_correspondences(src, tgt)
+    best = find_correspondences(src, tgt, top_k=50)
+    assert len(best) == 50
+    assert best.distances.max() <= np.sort(full.distances)[49] + 1e-12
+    both = find_correspondences(src, tgt, top_k=50, top_k_ratio=20)
+    assert len(both) == 20
+    assert set(map(tuple, both.pairs)) <= set(map(tuple, best.pairs))
+    assert both.ratios.max() <= np.sort(best.ratios)[19] + 1e-12
+    thresholded = find_correspondences(src, tgt, max_distance=1.0, max_ratio=0.8)
+    assert np.all(thresholded.distances <= 1.0) and np.all(thresholded.ratios <= 0.8)
+    assert np.array_equal(np.asarray(full), full.pairs)
+    assert len(full.to_open3d()) == 200
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(source_features=np.zeros((3, 4)), target_features=np.zeros((3, 5))), "differ"),
+        (dict(source_features=np.full((3, 4), np.nan), target_features=np.zeros((3, 4))), "NaN"),
+        (dict(source_features=np.zeros((0, 4)), target_features=np.zeros((3, 4))), "non-empty"),
+        (dict(source_features=np.eye(3), target_features=np.eye(3), top_k=0), "top_k"),
+        (dict(source_features=np.eye(3), target_features=np.eye(3), max_ratio=-1), "max_ratio"),
+    ],
+)
+def test_correspondence_bad_input(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        find_correspondences(**kwargs)

@@ -1,0 +1,68 @@
+"""ICP refinements."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import assert_close_pose, moved_copy, random_motion
+
+from o3d_rpointhop import (
+    GeneralizedICP,
+    MultiScaleICP,
+    PointToPlaneICP,
+    PointToPointICP,
+    register,
+)
+from o3d_rpointhop.transforms import rotation_error_deg
+
+
+# ----------------------------------------------------------------------------- refinement
+@pytest.mark.parametrize(
+    "step",
+    [
+        PointToPointICP(),
+        PointToPlaneICP(),
+        PointToPlaneICP(kernel="tukey"),
+        GeneralizedICP(),
+        MultiScaleICP(),
+    ],
+    ids=["point_to_point", "point_to_plane", "point_to_plane_tukey", "generalized", "multiscale"],
+)
+def test_icp_steps_converge_from_a_nearby_start(object_target, step):
+    source, truth = moved_copy(object_target, 6, permute=False)
+    nudge = np.eye(4)
+    nudge[:3, :3] = random_motion(7)[0]  # any rotation...
+    angle = np.radians(4.0)  # ... shrunk to 4 degrees
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    from scipy.spatial.transform import Rotation
+
+    nudge[:3, :3] = Rotation.from_rotvec(axis * angle).as_matrix()
+    nudge[:3, 3] = [0.01, -0.02, 0.015]
+    result = register(source, object_target, global_method=None, refine=step, init=nudge @ truth)
+    assert_close_pose(result.transformation, truth, 0.05, 1e-3)
+
+
+def test_multiscale_pulls_in_a_poor_start(object_target):
+    source, truth = moved_copy(object_target, 8, permute=False)
+    from scipy.spatial.transform import Rotation
+
+    start = np.eye(4)
+    start[:3, :3] = Rotation.from_rotvec([0.0, 0.0, np.radians(45)]).as_matrix()
+    start = start @ truth
+    plain = register(source, object_target, global_method=None, refine="point_to_point", init=start)
+    multi = register(
+        source,
+        object_target,
+        global_method=None,
+        refine=MultiScaleICP(scales=(8, 4, 1)),
+        init=start,
+    )
+    assert rotation_error_deg(multi.transformation, truth) < 0.1
+    assert rotation_error_deg(plain.transformation, truth) > 10  # one scale gets stuck
+
+
+def test_point_to_point_has_no_kernel_and_bad_kernels_are_named(object_target):
+    with pytest.raises(ValueError, match="step 'refine': The 'kernel' parameter of PointToPlane"):
+        register(
+            object_target, object_target, global_method=None, refine=PointToPlaneICP(kernel="fancy")
+        )

@@ -1,0 +1,83 @@
+"""Multiway registration: poses of unposed scans through a pose graph."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import partial_views
+
+from o3d_rpointhop import register_multiway
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
+
+
+def test_poses_of_a_synthetic_multiscan_object_are_recovered():
+    scans, truth = partial_views(4)
+    result = register_multiway(scans, seed=0)
+    assert result.unconnected == [] and len(result.poses) == 4
+    np.testing.assert_array_equal(result.poses[0], np.eye(4))
+    for k in range(1, 4):
+        assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
+        gap = apply_transform(scans[k], result.poses[k]) - apply_transform(scans[k], truth[k])
+        assert np.linalg.norm(gap, axis=1).mean() < 0.02
+    assert len(result.pose_graph.nodes) == 4 and len(result.edges) >= 3
+    assert set(result.pairs) == {(i, j) for i in range(4) for j in range(i + 1, 4)}
+
+
+def test_a_scan_of_something_else_is_reported_unconnected():
+    scans, truth = partial_views(3, seed=1)
+    stranger = make_object(1700, shape_seed=77) * 0.8 + 0.3  # another object entirely
+    result = register_multiway([*scans, stranger], seed=0)
+    assert result.unconnected == [3] and result.poses[3] is None
+    assert all((3 not in edge) for edge in result.edges)
+    for k in range(1, 3):
+        assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
+
+
+def test_scans_of_different_sizes_and_resolutions():
+    scans, truth = partial_views(3, seed=2, n_points=6000)
+    scans[1] = scans[1][::3]  # a third of the points: coarser spacing
+    scans[2] = np.concatenate([scans[2], scans[2] + 1e-4])  # every point twice
+    result = register_multiway(scans, seed=0)
+    assert result.unconnected == []
+    for k in (1, 2):
+        assert rotation_error_deg(result.poses[k], truth[k]) < 3.0
+
+
+@pytest.mark.parametrize(
+    ("clouds", "message"),
+    [
+        ([], "at least two clouds"),
+        ([make_object(500)], "at least two clouds"),
+        (make_object(500), "'clouds' parameter of register_multiway must be"),
+        ([make_object(500), np.full((50, 3), np.nan)], r"clouds\[1\]"),
+    ],
+)
+def test_bad_input(clouds, message):
+    with pytest.raises(ValueError, match=message):
+        register_multiway(clouds)
+
+
+def test_merging_meshing_and_the_summary_are_library_methods():
+    from scipy.spatial import cKDTree
+
+    scans, _ = partial_views(3, seed=1)
+    result = register_multiway(scans, seed=0)
+    merged = result.merge(scans)
+    assert merged.has_colors() and len(merged.points) > 1000
+    # The merged cloud is the scans placed in scan 0's frame, downsampled.
+    placed = np.concatenate(
+        [apply_transform(s, p) for s, p in zip(scans, result.poses, strict=True)]
+    )
+    assert cKDTree(placed).query(np.asarray(merged.points))[0].max() < result.voxel_size
+    coarse = result.merge(scans, voxel_size=2 * result.voxel_size, colour=False)
+    assert not coarse.has_colors() and len(coarse.points) < len(merged.points)
+    mesh = result.mesh(scans)
+    assert len(mesh.triangles) > 100
+    vertices = np.asarray(mesh.vertices)
+    assert cKDTree(placed).query(vertices)[0].mean() < 0.05  # a surface through the scans
+    summary = result.as_dict(["a", "b", "c"])
+    assert summary["scans"] == ["a", "b", "c"] and summary["unconnected"] == []
+    assert len(summary["poses"]) == 3 and summary["edges"]
+    with pytest.raises(ValueError, match="3 scans were registered, got 2"):
+        result.merge(scans[:2])

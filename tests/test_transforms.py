@@ -1,0 +1,74 @@
+"""Rigid transforms: the SVD fit and applying it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import random_motion
+
+from o3d_rpointhop import (
+    rigid_transform,
+)
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.transforms import apply_transform
+
+
+def motion_matrix(rot, shift):
+    t = np.eye(4)
+    t[:3, :3] = rot
+    t[:3, 3] = shift
+    return t
+
+
+@pytest.fixture(scope="module")
+def target():
+    return make_object(800, shape_seed=321)
+
+
+# ----------------------------------------------------------------------------- rigid fit
+def test_rigid_transform_is_exact_on_clean_pairs():
+    pts = make_object(50, shape_seed=1)
+    rot, shift = random_motion(4, 10.0)
+    est = rigid_transform(pts, pts @ rot.T + shift)
+    np.testing.assert_allclose(est, motion_matrix(rot, shift), atol=1e-10)
+
+
+def test_rigid_transform_never_returns_a_reflection():
+    rng = np.random.default_rng(2)
+    src = rng.normal(size=(30, 3))
+    mirrored = src * np.array([1.0, 1.0, -1.0])  # the best orthogonal fit is a reflection
+    est = rigid_transform(src, mirrored)
+    assert np.linalg.det(est[:3, :3]) == pytest.approx(1.0)
+
+
+def test_rigid_transform_weights_ignore_zero_weight_outliers():
+    pts = make_object(40, shape_seed=2)
+    rot, shift = random_motion(5)
+    tgt = pts @ rot.T + shift
+    tgt[:5] += 3.0  # outliers
+    weights = np.r_[np.zeros(5), np.ones(35)]
+    np.testing.assert_allclose(
+        rigid_transform(pts, tgt, weights), motion_matrix(rot, shift), atol=1e-10
+    )
+
+
+@pytest.mark.parametrize(
+    "src, tgt, message",
+    [
+        (np.zeros((2, 3)), np.zeros((2, 3)), "at least 3"),
+        (np.zeros((5, 3)), np.zeros((4, 3)), "matching"),
+        (
+            np.c_[np.arange(5.0), np.zeros((5, 2))],
+            np.c_[np.arange(5.0), np.zeros((5, 2))],
+            "collinear",
+        ),
+    ],
+)
+def test_rigid_transform_bad_input(src, tgt, message):
+    with pytest.raises(ValueError, match=message):
+        rigid_transform(src, tgt)
+
+
+def test_unmoved_input_is_applied_by_apply_transform(target):
+    t = motion_matrix(*random_motion(1))
+    np.testing.assert_allclose(apply_transform(target, t), target @ t[:3, :3].T + t[:3, 3])
