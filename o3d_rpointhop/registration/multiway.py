@@ -2,8 +2,11 @@
 
 Every scan is downsampled to one common resolution and described once. Candidate pairs
 (all pairs of a few scans; for many scans, each scan's nearest neighbours by a pooled
-descriptor) are registered like ``register()`` does: descriptor matches, the vectorised
-RANSAC, point-to-plane ICP on the full scans, and Open3D's information matrix. Pairs
+descriptor) are registered through :class:`~o3d_rpointhop.RegistrationPipeline` on a
+context that holds the prepared clouds and descriptors, with ``register()``'s steps
+(descriptor matches, RANSAC, point-to-plane ICP), its centring, resolution rules and
+flags, then measured (fitness and Open3D's information matrix at the settings'
+``edge_distance``). Pairs
 that fit become edges of an Open3D ``PoseGraph``: a maximum spanning tree of the best
 edges gives the starting poses and is kept as certain, every other edge is a loop
 closure that Open3D's Levenberg-Marquardt optimisation may prune (line process). The
@@ -15,6 +18,7 @@ unconnected and get no pose.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from numbers import Integral, Real
 from typing import Any
@@ -28,12 +32,12 @@ from .._utils.parallel import parallel_map, single_threaded
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points
 from ..open3d_interop import to_point_cloud
-from .correspondences import find_correspondences
+from .context import RegistrationContext
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor
-from .quality import MAX_SPREAD
+from .pipeline import RegistrationPipeline
+from .quality import RegistrationWarning
 from .settings import RegistrationSettings
-from .steps._ransac import ransac
-from .steps.icp import PointToPlaneICP
+from .steps import PointToPlaneICP, RANSACGlobal
 
 __all__ = ["MultiwayResult", "register_multiway"]
 
@@ -190,78 +194,58 @@ def _prepare(points: np.ndarray, voxel: float, descriptor: Any):
     return np.asarray(down.points), features
 
 
-def _register_pair(
-    source: np.ndarray,
-    target: np.ndarray,
-    source_global: np.ndarray,
-    target_global: np.ndarray,
-    source_features: np.ndarray,
-    target_features: np.ndarray,
-    settings: RegistrationSettings,
-    seed: int,
-):
-    """Scan ``source`` onto scan ``target``: matches, RANSAC, then :func:`_refine_edge`."""
-    corr = find_correspondences(source_features, target_features)
-    # Work about the target's centroid: survey-scale coordinates lose nothing.
-    origin = target.mean(axis=0)
-    found = ransac(
-        source_global[corr.pairs[:, 0]] - origin,
-        target_global[corr.pairs[:, 1]] - origin,
-        settings.ransac_distance,
-        max_iteration=1_000_000,
-        confidence=0.999,
-        edge_length=0.9,
+class _Described:
+    """Stands for the descriptor in a pair's context, whose descriptors are precomputed
+    (so the model is not shipped to every pair's task)."""
+
+    def transform(self, X):  # pragma: no cover - the features are always given
+        raise RuntimeError("the scans' descriptors were computed once, before the pairs")
+
+
+#: How a candidate pair is registered: as register() does by default.
+_PAIR_STEPS = (("global", RANSACGlobal()), ("refine", PointToPlaneICP()))
+
+
+def _pair_context(source, target, prepared_source, prepared_target, settings, seed):
+    """A context for scan ``source`` onto scan ``target`` at the common resolution, with
+    the scans' prepared global clouds (and descriptors, when given)."""
+    features = None
+    descriptor = None
+    if prepared_source[1] is not None:
+        descriptor = _Described()
+        features = (prepared_source[1], prepared_target[1])
+    return RegistrationContext(
+        source,
+        target,
+        voxel_size=settings.voxel_size,
         seed=seed,
-        clouds=(source_global - origin, target_global - origin),
+        descriptor=descriptor,
+        check=False,
+        settings=settings,
+        global_clouds=(prepared_source[0], prepared_target[0]),
+        features=features,
     )
-    return _refine_edge(source, target, settings, _about(origin, found.transformation))
 
 
-def _about(origin: np.ndarray, transformation: np.ndarray) -> np.ndarray:
-    """A transformation of coordinates centred on ``origin``, in the original ones."""
-    shift = np.eye(4)
-    shift[:3, 3] = origin
-    return shift @ transformation @ np.linalg.inv(shift)
-
-
-def _refine_edge(source, target, settings: RegistrationSettings, init: np.ndarray):
-    """ICP of ``source`` onto ``target`` from ``init``, about the target's centroid;
-    returns the transformation, its fitness at 1.5 resolutions (0 for an alignment whose
-    inliers spread like a chance one's) and Open3D's information matrix."""
-    origin = target.mean(axis=0)
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source - origin))
-    tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target - origin))
-    search = o3d.geometry.KDTreeSearchParamHybrid(radius=settings.normal_radius, max_nn=30)
-    tgt.estimate_normals(search)
-    transformation = _icp(src, tgt, settings, _about(-origin, init))
+def _register_pair(source, target, prepared_source, prepared_target, settings, seed, init=None):
+    """Scan ``source`` onto scan ``target`` through :class:`RegistrationPipeline`:
+    matches, RANSAC and point-to-plane ICP, or ICP alone from ``init``. Returns the
+    transformation, its edge fitness (the share of source points within the settings'
+    ``edge_distance``; 0 for a result that did not converge) and Open3D's information
+    matrix at that distance (in the pair's centred frame)."""
+    context = _pair_context(source, target, prepared_source, prepared_target, settings, seed)
+    steps = list(_PAIR_STEPS) if init is None else [_PAIR_STEPS[1]]
+    with warnings.catch_warnings():  # a pair that does not fit is simply no edge
+        warnings.simplefilter("ignore", RegistrationWarning)
+        result = RegistrationPipeline(steps).run(context, init, assess_ambiguity=False)
+    local = context.to_local(result.transformation)
     edge = settings.edge_distance
+    fitness = context.evaluate(local, edge).fitness if result.converged else 0.0
     with repeatable_open3d():
-        fitness = reg.evaluate_registration(src, tgt, edge, transformation).fitness
-        wide = settings.spread_distance
-        spread = reg.evaluate_registration(src, tgt, wide, transformation).inlier_rmse / wide
-        if spread > MAX_SPREAD:  # a chance alignment (see RegistrationResult.converged)
-            fitness = 0.0
-        information = reg.get_information_matrix_from_point_clouds(src, tgt, edge, transformation)
-    return _about(origin, transformation), float(fitness), information
-
-
-def _icp(source, target, settings: RegistrationSettings, init: np.ndarray) -> np.ndarray:
-    """Point-to-plane ICP with ``register()``'s default schedule and criteria (those of
-    :class:`PointToPlaneICP`), on clouds that already carry target normals."""
-    step = PointToPlaneICP()
-    criteria = step.criteria()
-    current = init
-    with repeatable_open3d():
-        for distance in settings.icp_distances:
-            current = reg.registration_icp(
-                source,
-                target,
-                distance,
-                current,
-                reg.TransformationEstimationPointToPlane(),
-                criteria,
-            ).transformation
-    return np.array(current)
+        information = reg.get_information_matrix_from_point_clouds(
+            context.source, context.target, edge, local
+        )
+    return result.transformation, float(fitness), information
 
 
 def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
@@ -440,19 +424,7 @@ def register_multiway(
     candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
     results = parallel_map(
         _register_pair,
-        [
-            (
-                points[j],
-                points[i],
-                prepared[j][0],
-                prepared[i][0],
-                features[j],
-                features[i],
-                settings,
-                seed,
-            )
-            for i, j in candidates
-        ],
+        [(points[j], points[i], prepared[j], prepared[i], settings, seed) for i, j in candidates],
         n_jobs=n_jobs,
         progress=progress,
         desc="pairs",
@@ -471,8 +443,10 @@ def register_multiway(
     # keeps the fitness that made it an edge).
     refined = {}
     for i, j in kept:
-        transformation, _, information = _refine_edge(
-            points[j], points[i], settings, np.linalg.inv(poses[i]) @ poses[j]
+        clouds = (prepared[j][0], None), (prepared[i][0], None)
+        init = np.linalg.inv(poses[i]) @ poses[j]
+        transformation, _, information = _register_pair(
+            points[j], points[i], *clouds, settings, seed, init
         )
         refined[(i, j)] = (transformation, edges[(i, j)][1], information)
     if refined:
