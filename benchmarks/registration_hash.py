@@ -88,7 +88,7 @@ def cases(data=None):
             out.append((f"{name} descriptors {descriptor_name}", describe))
     for name, source, target in pairs:
         for descriptor_name, descriptor in (("rpointhop", default), ("fpfh", fpfh)):
-            for global_method in ("ransac", "fgr", "svd"):
+            for global_method in ("ransac", "consensus", "fgr", "svd"):
 
                 def run(s=source, t=target, d=descriptor, g=global_method):
                     return _result_digest(

@@ -11,6 +11,7 @@ from ._version import __version__
 from .descriptors import FPFHTransformer, RPointHopTransformer
 from .open3d_interop import to_open3d_feature, to_point_cloud
 from .registration import (
+    ConsensusGlobal,
     Correspondences,
     FGRGlobal,
     GeneralizedICP,
@@ -33,6 +34,7 @@ from .registration import (
 from .transforms import rigid_transform
 
 __all__ = [
+    "ConsensusGlobal",
     "Correspondences",
     "FGRGlobal",
     "FPFHTransformer",

@@ -40,6 +40,12 @@ def add_parser(commands) -> None:
     p.add_argument(
         "--scenes", help="3DMatch: comma-separated scene names (or parts of them) to keep"
     )
+    p.add_argument(
+        "--rotate",
+        action="store_true",
+        help="3DMatch: turn every source fragment by a random rotation (uniform over SO(3), "
+        "seeded) before registering",
+    )
     add_model(p, default="register()'s default, the ModelNet40 model on 128 axes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
@@ -55,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.dataset == "multiway":
         return _multiway(args)
+    if args.rotate and args.dataset != "3dmatch":
+        raise CommandError("--rotate applies to 3dmatch (the object protocols rotate already)")
     methods = args.methods.split(",") if args.methods else default_methods(args.dataset)
     model = load_model(args.model) if args.model else default_descriptor()
     common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
@@ -67,7 +75,9 @@ def run(args: argparse.Namespace) -> int:
         if args.protocol:
             raise CommandError("3dmatch has no protocols to choose")
         scenes = args.scenes.split(",") if args.scenes else None
-        results = run_3dmatch(methods, max_pairs=args.max_pairs, scenes=scenes, **common)
+        results = run_3dmatch(
+            methods, max_pairs=args.max_pairs, scenes=scenes, rotate=args.rotate, **common
+        )
     paths = write_report(results, args.output)
     print(markdown(results))  # with the timings: the terminal is not a result file
     print("written: " + ", ".join(paths))

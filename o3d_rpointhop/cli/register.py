@@ -41,9 +41,11 @@ def add_parser(commands) -> None:
     p.add_argument(
         "--global",
         dest="global_method",
-        choices=[*GLOBAL_METHODS, "none"],
-        default="ransac",
-        help="global estimate (default: ransac)",
+        choices=["auto", *GLOBAL_METHODS, "none"],
+        default="auto",
+        help="global estimate (default: auto, the step that won on the descriptor's "
+        "training data: consensus for --model scene, else ransac; with --descriptor fpfh "
+        "on indoor scans, consensus wins)",
     )
     refinements = [name for name in REFINE_METHODS if name != "symmetry_check"]
     p.add_argument(

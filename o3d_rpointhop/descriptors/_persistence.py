@@ -10,7 +10,9 @@ Layout (format version 3; version 1 files, without the PCA entries and the
     metadata           0-d str array, JSON: format, format_version, library_version,
                        params, n_hops, n_features_out, n_training_clouds, and
                        training_scenes (optional: the scene folders a scene model saw),
-                       registration_points (optional: register()'s global cloud size)
+                       registration_points (optional: register()'s global cloud size),
+                       registration_global_method (optional: register()'s "auto"
+                       global step)
     hop{h}_kernels     (n_channels, dim, dim) float32
     hop{h}_means       (n_channels, dim) float32
     hop{h}_energies    (n_channels, dim) float32
@@ -79,6 +81,9 @@ def save_model(model: Any, path: str | PathLike) -> None:
     points = getattr(model, "registration_points_", None)
     if points is not None:
         meta["registration_points"] = int(points)
+    method = getattr(model, "registration_global_method_", None)
+    if method is not None:
+        meta["registration_global_method"] = str(method)
     arrays = {"metadata": np.array(json.dumps(meta))}
     for h in range(len(model.kernels_)):
         # float32: the transform applies kernels and means in float32 (the features'
@@ -215,5 +220,10 @@ def _from_arrays(cls: type, path, archive) -> Any:
         if not (isinstance(points, int) and not isinstance(points, bool) and points >= 3):
             raise _invalid(path, "registration_points is not a count of at least 3")
         model.registration_points_ = points
+    method = meta.get("registration_global_method")
+    if method is not None:
+        if not isinstance(method, str):
+            raise _invalid(path, "registration_global_method is not a name")
+        model.registration_global_method_ = method
     model._projection()  # n_components within the stored axes
     return model

@@ -137,6 +137,10 @@ class RPointHopTransformer(BaseDescriptor):
         when :func:`~o3d_rpointhop.register` describes it (its ``n_global_points="auto"``
         reads it; the shipped scene model: 4096, chosen on its training scenes). Stored
         in the model file.
+    registration_global_method_ : str
+        Only on models that state it: the global step :func:`~o3d_rpointhop.register`
+        runs with ``global_method="auto"`` (the shipped scene model: ``"consensus"``,
+        chosen on its training scenes). Stored in the model file.
 
     See Also
     --------

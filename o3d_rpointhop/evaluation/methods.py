@@ -1,15 +1,19 @@
 """The registration methods every benchmark table compares, measured in the same run.
 
-R-PointHop methods go through :func:`~o3d_rpointhop.register`. The FPFH methods are
-Open3D's own pipeline, step for step as in its global registration tutorial (voxel
-downsampling, normals at 2 voxels, FPFH at 5 voxels, RANSAC on mutual feature matches at
-1.5 voxels or FGR at 0.5 voxels, point-to-plane ICP at 0.4 voxels), so "beats FPFH" means
-beats what an Open3D user gets. ``fpfh-pipeline-ransac-icp`` runs FPFH through this
-library's pipeline instead, to separate the descriptor from the pipeline.
+R-PointHop methods go through :func:`~o3d_rpointhop.register`, with the global step
+they name. The ``fpfh-ransac*`` and ``fpfh-fgr`` methods are Open3D's own pipeline, step
+for step as in its global registration tutorial (voxel downsampling, normals at 2
+voxels, FPFH at 5 voxels, RANSAC on mutual feature matches at 1.5 voxels or FGR at 0.5
+voxels, point-to-plane ICP at 0.4 voxels), so "beats FPFH" means beats what an Open3D
+user gets. ``fpfh-pipeline-*`` run FPFH through this library's steps instead, to
+separate the descriptor from the pipeline. ``kiss-matcher`` is KISS-Matcher (Lim et
+al., 2025) end to end, from its pip wheel (the optional ``[peers]`` extra); without it
+installed the method is skipped with a line on stderr.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from collections.abc import Callable
@@ -186,9 +190,38 @@ def _run_fpfh_fgr(source, target, descriptor, voxel, seed):
     return _fpfh_fgr(source, target, voxel, seed)
 
 
-def _run_fpfh_pipeline(source, target, descriptor, voxel, seed):
-    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
-    return register(source, target, fpfh, seed=seed).transformation
+def _fpfh_pipeline(**options):
+    """FPFH (radii from the spacing) through :func:`~o3d_rpointhop.register`."""
+
+    def run(source, target, descriptor, voxel, seed):
+        fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
+        return register(source, target, fpfh, seed=seed, **options).transformation
+
+    return run
+
+
+def kiss_matcher_available() -> bool:
+    """Whether the optional KISS-Matcher wheel is installed."""
+    from importlib.util import find_spec
+
+    return find_spec("kiss_matcher") is not None
+
+
+def _run_kiss_matcher(source, target, descriptor, voxel, seed):
+    """KISS-Matcher's own pipeline (voxelisation, Faster-PFH, matching, ROBIN pruning,
+    GNC-TLS) at the resolution the other methods use; no refinement after it."""
+    import kiss_matcher
+
+    config = kiss_matcher.KISSMatcherConfig(voxel_size=float(voxel))
+    matcher = kiss_matcher.KISSMatcher(config)
+    src = np.asarray(to_point_cloud(source).points, dtype=np.float32)
+    tgt = np.asarray(to_point_cloud(target).points, dtype=np.float32)
+    solution = matcher.estimate(src, tgt)
+    out = np.eye(4)
+    if solution.valid:
+        out[:3, :3] = np.asarray(solution.rotation)
+        out[:3, 3] = np.asarray(solution.translation).ravel()
+    return out
 
 
 def _run_rpointhop_open3d(source, target, descriptor, voxel, seed):
@@ -227,24 +260,40 @@ METHODS = _methods(
         default_on=_OBJECTS,
     ),
     Method(
-        "rpointhop-ransac", "R-PointHop + RANSAC", _register_with(refine=None), default_on=_OBJECTS
+        "rpointhop-ransac",
+        "R-PointHop + RANSAC",
+        _register_with(global_method="ransac", refine=None),
+        default_on=_OBJECTS,
     ),
     Method(
         "rpointhop-ransac-icp",
         "R-PointHop + RANSAC + point-to-plane ICP",
-        _register_with(),
+        _register_with(global_method="ransac"),
+        default_on=_OBJECTS,
+    ),
+    Method(
+        "rpointhop-consensus-icp",
+        "R-PointHop + consensus + point-to-plane ICP",
+        _register_with(global_method="consensus"),
         default_on=_OBJECTS,
     ),
     Method(
         "rpointhop-scene",
-        "R-PointHop, shipped scene model + RANSAC + point-to-plane ICP (register() defaults)",
+        "R-PointHop, shipped scene model, register() defaults",
         _register_with(),
         default_on=_SCENES,
         model="scene",
     ),
     Method(
+        "rpointhop-scene-ransac",
+        "R-PointHop, shipped scene model + RANSAC + point-to-plane ICP",
+        _register_with(global_method="ransac"),
+        default_on=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-loso",
-        "R-PointHop, scene model fitted on the other scenes + RANSAC + point-to-plane ICP",
+        "R-PointHop, scene model fitted on the other scenes, register() defaults",
         _register_with(),
         datasets=_SCENES,
         default_on=_SCENES,
@@ -253,13 +302,12 @@ METHODS = _methods(
     Method(
         "rpointhop-ransac-icp-4096",
         "R-PointHop + RANSAC + point-to-plane ICP, 4096 global points",
-        _register_with(n_global_points=4096),
-        default_on=_SCENES,
+        _register_with(global_method="ransac", n_global_points=4096),
     ),
     Method(
         "rpointhop-ransac-icp-sym",
         "R-PointHop + RANSAC + point-to-plane ICP + symmetry check",
-        _register_with(refine=["point_to_plane", "symmetry_check"]),
+        _register_with(global_method="ransac", refine=["point_to_plane", "symmetry_check"]),
         default_on=_OBJECTS,
     ),
     Method(
@@ -297,7 +345,14 @@ METHODS = _methods(
     Method(
         "fpfh-pipeline-ransac-icp",
         "FPFH through this library's RANSAC + ICP",
-        _run_fpfh_pipeline,
+        _fpfh_pipeline(global_method="ransac"),
+        default_on=_ALL,
+        model=None,
+    ),
+    Method(
+        "fpfh-pipeline-consensus-icp",
+        "FPFH through this library's consensus + ICP",
+        _fpfh_pipeline(global_method="consensus"),
         default_on=_ALL,
         model=None,
     ),
@@ -308,6 +363,13 @@ METHODS = _methods(
         default_on=_OBJECTS,
         model=None,
         open3d_only=True,
+    ),
+    Method(
+        "kiss-matcher",
+        "KISS-Matcher end to end (pip wheel)",
+        _run_kiss_matcher,
+        default_on=_SCENES,
+        model=None,
     ),
     Method(
         "icp",
@@ -335,6 +397,12 @@ def check_methods(methods, dataset: str) -> list[str]:
     if elsewhere:
         where = sorted({d for m in elsewhere for d in METHODS[m].datasets})
         raise ValueError(f"{elsewhere} do not apply to {dataset} (only to {', '.join(where)})")
+    if "kiss-matcher" in methods and not kiss_matcher_available():
+        print(
+            "benchmark: kiss-matcher skipped: not installed (pip install 'o3d-rpointhop[peers]')",
+            file=sys.stderr,
+        )
+        methods.remove("kiss-matcher")
     return methods
 
 
@@ -361,6 +429,10 @@ def run_method(
     """
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
+    if name == "kiss-matcher" and not kiss_matcher_available():
+        raise ValueError(
+            "kiss-matcher is not installed: pip install 'o3d-rpointhop[peers]' (or kiss-matcher)"
+        )
     method = METHODS[name]
     # Loading a model file is not part of a method's time.
     if method.model == "scene":

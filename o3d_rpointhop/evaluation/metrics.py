@@ -8,7 +8,14 @@ from scipy.spatial import cKDTree
 
 from ..transforms import apply_transform, euler_angles_deg, rotation_error_deg, translation_error
 
-__all__ = ["pair_errors", "summarize", "is_symmetry", "rmse_3dmatch", "match_inlier_ratio"]
+__all__ = [
+    "is_symmetry",
+    "match_inliers",
+    "mcnemar",
+    "pair_errors",
+    "rmse_3dmatch",
+    "summarize",
+]
 
 
 def _wrap(deg: np.ndarray) -> np.ndarray:
@@ -93,11 +100,11 @@ def rmse_3dmatch(estimate: np.ndarray, truth: np.ndarray, information: np.ndarra
     return float(np.sqrt(max(xi @ information @ xi / information[0, 0], 0.0)))
 
 
-def match_inlier_ratio(context, descriptor, truth: np.ndarray, radius: float = 0.1) -> float:
-    """Share of the mutual nearest-descriptor matches between the global clouds of a
-    :class:`~o3d_rpointhop.registration.context.RegistrationContext` that lie within
-    ``radius`` of each other under ``truth`` (feature-match recall counts a pair when
-    this exceeds 0.05)."""
+def match_inliers(context, descriptor, truth: np.ndarray, radius: float = 0.1) -> tuple:
+    """The share and the number of the mutual nearest-descriptor matches between the
+    global clouds of a :class:`~o3d_rpointhop.registration.context.RegistrationContext`
+    that lie within ``radius`` of each other under ``truth`` (feature-match recall counts
+    a pair when the share exceeds 0.05)."""
     from ..registration.correspondences import find_correspondences
 
     src = np.asarray(context.global_cloud("source").points)
@@ -108,4 +115,23 @@ def match_inlier_ratio(context, descriptor, truth: np.ndarray, radius: float = 0
         mutual_filter=True,
     )
     moved = apply_transform(src[corr.pairs[:, 0]], context.to_local(truth))
-    return float((np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < radius).mean())
+    inside = np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < radius
+    return float(inside.mean()), int(inside.sum())
+
+
+def mcnemar(a: np.ndarray, b: np.ndarray) -> dict:
+    """McNemar's exact test of two methods' successes on the same pairs.
+
+    Only the discordant pairs count: ``a_only`` where the first succeeded and the second
+    failed, ``b_only`` the reverse. Under "the two methods are as good", each discordant
+    pair goes either way with probability 1/2, so the two-sided p-value is the binomial
+    tail of the smaller count; a small p-value (say below 0.05) says the difference in
+    recall is not chance.
+    """
+    from scipy.stats import binomtest
+
+    a, b = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
+    a_only, b_only = int((a & ~b).sum()), int((b & ~a).sum())
+    n = a_only + b_only
+    p = 1.0 if n == 0 else float(binomtest(min(a_only, b_only), n, 0.5).pvalue)
+    return {"a_only": a_only, "b_only": b_only, "p_value": p}

@@ -139,7 +139,38 @@ def markdown(results: dict) -> str:
         if "feature_match_recall" in protocol:
             fmr = ", ".join(f"{k} {v:.1%}" for k, v in protocol["feature_match_recall"].items())
             lines += ["", f"Feature-match recall (tau1 0.1 m, tau2 0.05): {fmr}."]
+        if "match_inliers" in protocol:
+            lines += [
+                "",
+                "Mutual matches within 0.1 m under the ground truth (medians over pairs):",
+                "",
+                "| descriptor | inlier ratio | inlier count |",
+                "|---|---|---|",
+            ]
+            for name, row in protocol["match_inliers"].items():
+                ratio, count = row["median_inlier_ratio"], row["median_inlier_count"]
+                lines.append(f"| {name} | {ratio:.1%} | {count:.0f} |")
+        if "paired" in protocol:
+            lines += ["", *_paired_table(protocol["paired"])]
     return "\n".join(lines) + "\n"
+
+
+def _paired_table(paired: dict) -> list[str]:
+    """McNemar's exact test for every two methods on the same pairs."""
+    lines = [
+        "Paired comparisons on the same pairs (McNemar's exact test: pairs only the first "
+        "method registered, only the second, two-sided p-value; below 0.05 the difference "
+        "is unlikely to be chance):",
+        "",
+        "| first | second | first only | second only | p |",
+        "|---|---|---|---|---|",
+    ]
+    for key, test in paired.items():
+        first, second = key.split(" vs ")
+        lines.append(
+            f"| {first} | {second} | {test['a_only']} | {test['b_only']} | {test['p_value']:.3g} |"
+        )
+    return lines
 
 
 def _plots(results: dict, folder: Path, stem: str) -> list[str]:

@@ -13,7 +13,7 @@ from ..registration.defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, r
 from ..transforms import rotation_error_deg, translation_error
 from ._common import Progress, machine_facts, model_facts
 from .methods import METHODS, check_methods, run_method, shipped_scene_model
-from .metrics import match_inlier_ratio, rmse_3dmatch
+from .metrics import match_inliers, mcnemar, rmse_3dmatch
 from .scene_models import leave_one_scene_out
 
 __all__ = ["run_3dmatch"]
@@ -28,6 +28,7 @@ def run_3dmatch(
     progress: bool = True,
     max_pairs: int | None = None,
     scenes: Iterable[str] | None = None,
+    rotate: bool = False,
 ) -> dict:
     """3DMatch / 3DLoMatch fragment pairs with official ground truth.
 
@@ -47,10 +48,16 @@ def run_3dmatch(
     results on scenes a model saw are read apart from those on scenes it did not.
     Rotation and translation errors are medians over the registered pairs.
 
+    ``rotate``: every source fragment is first turned about its centroid by a rotation
+    drawn uniformly over SO(3) (seeded), so that no method can lean on the fragments'
+    shared upright frame; errors are measured in the original frames.
+
     Registration recall: share of pairs whose official error (from ``gt.info``) is below
     0.2 m. Feature-match recall: share of pairs where more than 5 % of the mutual
     nearest-descriptor matches (on the registration's downsampled clouds) lie within
-    0.1 m of each other under the ground truth.
+    0.1 m of each other under the ground truth; the median share (inlier ratio) and
+    number (inlier count) of those matches are reported beside it. Every two methods
+    are compared on the same pairs by McNemar's exact test (``paired``).
     """
     from ..datasets.threedmatch import load_3dmatch_pairs
 
@@ -70,6 +77,11 @@ def run_3dmatch(
             keep = np.sort(rng.permutation(len(these))[:max_pairs])
             picked += [these[k] for k in keep]
         pairs = picked
+    motions = {}  # a turned source's motion, by pair
+    if rotate:
+        turned = [_turned(p, seed, k) for k, p in enumerate(pairs)]
+        pairs = [p for p, _ in turned]
+        motions = {id(p): motion for p, motion in turned}
     pair_scenes = sorted({p.scene for p in pairs})
     uses = {METHODS[m].model for m in methods}
     scene_model = shipped_scene_model() if "scene" in uses else None
@@ -81,6 +93,7 @@ def run_3dmatch(
         "settings": {
             "seed": seed,
             "pairs_per_benchmark": "all" if max_pairs is None else f"at most {max_pairs}",
+            "source_turned": rotate,
             **model_facts(model),
             **machine_facts(),
             "model_training_scenes": sorted(seen),
@@ -130,11 +143,13 @@ def run_3dmatch(
             if size not in contexts:
                 contexts[size] = RegistrationContext(pair.source, pair.target, n_global_points=size)
             own = contexts[size]
+            ratio, count = match_inliers(own, descriptor, pair.truth)
             fmr[name].append(
                 {
                     "pair": f"{pair.scene} {pair.i}-{pair.j}",
                     "benchmark": pair.benchmark,
-                    "inlier_ratio": match_inlier_ratio(own, descriptor, pair.truth),
+                    "inlier_ratio": ratio,
+                    "inlier_count": count,
                 }
             )
             bar.step(f"fmr {name}")
@@ -154,7 +169,10 @@ def run_3dmatch(
                     voxel=voxels[id(pair)],
                     seed=seed,
                 )
-                rmse = rmse_3dmatch(estimate, pair.truth, pair.information)
+                # Errors in the pair's original frames (a turned source turned back).
+                motion = motions.get(id(pair), np.eye(4))
+                estimate, truth = estimate @ motion, pair.truth @ motion
+                rmse = rmse_3dmatch(estimate, truth, pair.information)
                 recs.append(
                     {
                         "pair": f"{pair.scene} {pair.i}-{pair.j}",
@@ -162,24 +180,35 @@ def run_3dmatch(
                         "rmse": rmse,
                         "registered": rmse < 0.2,
                         "seconds": seconds,
-                        "rotation_error_deg": rotation_error_deg(estimate, pair.truth),
-                        "translation_error": translation_error(estimate, pair.truth),
+                        "rotation_error_deg": rotation_error_deg(estimate, truth),
+                        "translation_error": translation_error(estimate, truth),
                     }
                 )
                 bar.step(method)
             summaries[method] = _summary(recs)
             records[method] = recs
-        feature_recall = {
-            name: float(
-                np.mean([r["inlier_ratio"] > 0.05 for r in rows if r["benchmark"] == bench])
+        feature_recall, inliers = {}, {}
+        for name, rows in fmr.items():
+            mine = [r for r in rows if r["benchmark"] == bench]
+            feature_recall[name] = float(np.mean([r["inlier_ratio"] > 0.05 for r in mine]))
+            inliers[name] = {
+                "median_inlier_ratio": float(np.median([r["inlier_ratio"] for r in mine])),
+                "median_inlier_count": float(np.median([r["inlier_count"] for r in mine])),
+            }
+        paired = {
+            f"{a} vs {b}": mcnemar(
+                [r["registered"] for r in records[a]], [r["registered"] for r in records[b]]
             )
-            for name, rows in fmr.items()
+            for k, a in enumerate(methods)
+            for b in methods[k + 1 :]
         }
         unseen = [k for k, p in enumerate(chosen) if p.scene not in seen]
         out["protocols"][bench] = {
             "summary": summaries,
             "per_scene": _per_scene(chosen, records),
             "feature_match_recall": feature_recall,
+            "match_inliers": inliers,
+            "paired": paired,
             "records": records,
             "inlier_ratios": fmr,
         }
@@ -217,3 +246,22 @@ def _per_scene(pairs, records: dict) -> dict:
             hits = [r["registered"] for p, r in zip(pairs, recs, strict=True) if p.scene == scene]
             out[method][scene] = {"pairs": len(hits), "registration_recall": float(np.mean(hits))}
     return out
+
+
+def _turned(pair, seed: int, k: int):
+    """``pair`` with its source turned about its centroid by a seeded rotation, uniform
+    over SO(3), and the motion that maps the original source onto the turned one."""
+    import dataclasses
+
+    from scipy.spatial.transform import Rotation
+
+    rotation = Rotation.random(random_state=np.random.default_rng([seed, k])).as_matrix()
+    centre = pair.source.mean(axis=0)
+    motion = np.eye(4)
+    motion[:3, :3], motion[:3, 3] = rotation, centre - rotation @ centre
+    turned = dataclasses.replace(
+        pair,
+        source=(pair.source - centre) @ rotation.T + centre,
+        truth=pair.truth @ np.linalg.inv(motion),
+    )
+    return turned, motion

@@ -18,6 +18,7 @@ from .result import RegistrationResult, StepResult
 from .scoring import registration_recall, registration_scorer
 from .settings import RegistrationSettings
 from .steps import (
+    ConsensusGlobal,
     FGRGlobal,
     GeneralizedICP,
     MultiScaleICP,
@@ -30,6 +31,7 @@ from .steps import (
 )
 
 __all__ = [
+    "ConsensusGlobal",
     "Correspondences",
     "FGRGlobal",
     "GeneralizedICP",

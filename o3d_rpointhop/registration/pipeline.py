@@ -20,12 +20,13 @@ from sklearn.utils.metaestimators import _BaseComposition
 from sklearn.utils.validation import check_is_fitted
 
 from .context import RegistrationContext
-from .defaults import default_descriptor
+from .defaults import default_descriptor, resolve_global_method
 from .quality import RegistrationWarning, assess, warn_flags
 from .result import RegistrationResult
 from .scoring import check_pairs, registration_scorer
 from .settings import RegistrationSettings
 from .steps import (
+    ConsensusGlobal,
     FGRGlobal,
     GeneralizedICP,
     MultiScaleICP,
@@ -39,7 +40,12 @@ from .steps import (
 
 __all__ = ["RegistrationPipeline", "register", "GLOBAL_METHODS", "REFINE_METHODS"]
 
-GLOBAL_METHODS = {"ransac": RANSACGlobal, "fgr": FGRGlobal, "svd": SVDGlobal}
+GLOBAL_METHODS = {
+    "ransac": RANSACGlobal,
+    "consensus": ConsensusGlobal,
+    "fgr": FGRGlobal,
+    "svd": SVDGlobal,
+}
 REFINE_METHODS = {
     "point_to_point": PointToPointICP,
     "point_to_plane": PointToPlaneICP,
@@ -353,7 +359,7 @@ def _check_refinements(refine: Any) -> list:
     {
         "source": "no_validation",
         "target": "no_validation",
-        "global_method": [StrOptions(set(GLOBAL_METHODS)), RegistrationStep, None],
+        "global_method": [StrOptions({*GLOBAL_METHODS, "auto"}), RegistrationStep, None],
         "refine": [StrOptions({*REFINE_METHODS, "none"}), RegistrationStep, list, tuple, None],
         "init": ["array-like", None],
         **{
@@ -368,7 +374,7 @@ def register(
     target: Any,
     descriptor: Any = None,
     *,
-    global_method: str | RegistrationStep | None = "ransac",
+    global_method: str | RegistrationStep | None = "auto",
     refine: str | RegistrationStep | list | None = "point_to_plane",
     voxel_size: float | str = "auto",
     n_global_points: int | str = "auto",
@@ -385,9 +391,16 @@ def register(
     descriptor : transformer, default=None
         Fitted ``RPointHopTransformer`` or an ``FPFHTransformer``; ``None`` is the
         pretrained R-PointHop model.
-    global_method : {"ransac", "fgr", "svd"}, RegistrationStep or None, default="ransac"
-        ``"svd"`` is the paper's one-shot estimate; ``None`` skips the global step (ICP
-        from ``init``).
+    global_method : {"auto", "ransac", "consensus", "fgr", "svd"}, RegistrationStep or \
+            None, default="auto"
+        ``"ransac"`` is :class:`RANSACGlobal`, ``"consensus"`` the correspondence-graph
+        :class:`ConsensusGlobal`, ``"fgr"`` Open3D's Fast Global Registration, ``"svd"``
+        the paper's one-shot estimate; ``None`` skips the global step (ICP from
+        ``init``). ``"auto"``: the step that won on the descriptor's training data
+        (:func:`~o3d_rpointhop.registration.defaults.resolve_global_method`): the
+        consensus for the shipped scene model, which states it; RANSAC for the
+        ModelNet40 model, FPFH and anything that states nothing. For FPFH on indoor
+        scans pass ``"consensus"`` (it wins there; see docs/consensus.md).
     refine : {"point_to_plane", "point_to_point", "generalized", "multiscale", \
             "symmetry_check"}, step, list of those, or None, default="point_to_plane"
         Run in order. ``"symmetry_check"`` (:class:`SymmetryCheck`) after an ICP step
@@ -424,6 +437,12 @@ def register(
     True
     """
     steps: list[tuple[str, RegistrationStep]] = []
+    global_method = resolve_global_method(global_method, descriptor)
+    if isinstance(global_method, str) and global_method not in GLOBAL_METHODS:
+        raise ValueError(
+            f"the descriptor's registration_global_method_ {global_method!r} is not one "
+            f"of {sorted(GLOBAL_METHODS)}"
+        )
     if global_method is not None:
         steps.append(("global", _make_step(global_method, GLOBAL_METHODS)))
     previous = None

@@ -66,6 +66,12 @@ class RegistrationSettings:
     edge_factor : float, default=1.5
         Multiway registration: edge fitness, information matrices and the pose graph's
         correspondence distance.
+    consensus_factor : float, default=1.5
+        :class:`~o3d_rpointhop.ConsensusGlobal`: the largest length difference of two
+        compatible matches.
+    score_factor : float, default=2.0
+        :class:`~o3d_rpointhop.ConsensusGlobal`: the truncation of its hypotheses'
+        score.
 
     Examples
     --------
@@ -86,6 +92,8 @@ class RegistrationSettings:
     symmetry_factor: float = 2.0
     spread_factor: float = 3.0
     edge_factor: float = 1.5
+    consensus_factor: float = 1.5
+    score_factor: float = 2.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -149,6 +157,14 @@ class RegistrationSettings:
     @property
     def edge_distance(self) -> float:
         return self._times(self.edge_factor)
+
+    @property
+    def consensus_distance(self) -> float:
+        return self._times(self.consensus_factor)
+
+    @property
+    def score_distance(self) -> float:
+        return self._times(self.score_factor)
 
 
 def _positive(value: Any) -> bool:

@@ -36,11 +36,13 @@ def test_default_method_sets_are_the_committed_ones():
         "rpointhop-svd-icp",
         "rpointhop-ransac",
         "rpointhop-ransac-icp",
+        "rpointhop-consensus-icp",
         "rpointhop-ransac-icp-sym",
         "fpfh-ransac",
         "fpfh-fgr",
         "fpfh-ransac-icp",
         "fpfh-pipeline-ransac-icp",
+        "fpfh-pipeline-consensus-icp",
         "rpointhop-open3d-ransac-icp",
         "icp",
     ]

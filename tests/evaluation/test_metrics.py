@@ -8,7 +8,8 @@ import pytest
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.evaluation.metrics import (
     is_symmetry,
-    match_inlier_ratio,
+    match_inliers,
+    mcnemar,
     pair_errors,
     rmse_3dmatch,
     summarize,
@@ -46,7 +47,7 @@ def test_symmetry_check():
     assert not is_symmetry(tilt, np.eye(4), cylinder)
 
 
-def test_3dmatch_error_and_match_inlier_ratio():
+def test_3dmatch_error_and_match_inliers():
     from scipy.spatial.transform import Rotation
 
     from o3d_rpointhop import FPFHTransformer
@@ -64,5 +65,16 @@ def test_3dmatch_error_and_match_inlier_ratio():
     source = apply_transform(target, np.linalg.inv(truth))  # truth maps source to target
     context = RegistrationContext(source, target)
     fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
-    assert match_inlier_ratio(context, fpfh, truth) > 0.5
-    assert match_inlier_ratio(context, fpfh, shifted, radius=0.1) == 0.0
+    ratio, count = match_inliers(context, fpfh, truth)
+    assert ratio > 0.5 and count > 10
+    assert match_inliers(context, fpfh, shifted, radius=0.1) == (0.0, 0)
+
+
+def test_mcnemar_counts_discordant_pairs_and_gives_the_exact_p_value():
+    a = np.array([True] * 10 + [False] * 2 + [True] * 5)
+    b = np.array([False] * 10 + [True] * 2 + [True] * 5)
+    test = mcnemar(a, b)
+    assert (test["a_only"], test["b_only"]) == (10, 2)
+    # Two-sided exact binomial: 2 * P(X <= 2), X ~ Bin(12, 1/2) = 2 * 79 / 4096.
+    assert test["p_value"] == pytest.approx(2 * 79 / 4096)
+    assert mcnemar(a, a) == {"a_only": 0, "b_only": 0, "p_value": 1.0}

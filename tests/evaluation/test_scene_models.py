@@ -36,6 +36,7 @@ def test_leave_one_scene_out_never_sees_its_scene(scene_folder):
     for model in models.values():
         assert model.n_training_clouds_ == 4
         assert model.registration_points_ == REGISTRATION_POINTS
+        assert model.registration_global_method_ == "consensus"
         assert model.attributes == ("xyz", "normal", "eigen")
     cloud = make_object(1500, shape_seed=99)
     a, c = (models[s].transform(cloud) for s in ("scene-a", "scene-c"))

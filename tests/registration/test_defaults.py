@@ -1,17 +1,25 @@
-"""What a registration uses when not told: the global cloud size a model states."""
+"""What a registration uses when not told: the global cloud size and the global step a
+model states."""
 
 from __future__ import annotations
 
 import pytest
 
 from o3d_rpointhop import (
+    FPFHTransformer,
     PointToPlaneICP,
+    RANSACGlobal,
     RegistrationPipeline,
     register,
 )
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.registration.context import RegistrationContext
-from o3d_rpointhop.registration.defaults import DEFAULT_GLOBAL_POINTS, resolve_global_points
+from o3d_rpointhop.registration.defaults import (
+    DEFAULT_GLOBAL_METHOD,
+    DEFAULT_GLOBAL_POINTS,
+    resolve_global_method,
+    resolve_global_points,
+)
 
 
 class _Stated:
@@ -46,3 +54,34 @@ def test_the_global_step_takes_the_descriptors_size():
     kept = len(stated.global_cloud("source").points)
     assert 700 < kept <= 1.15 * 1000
     assert stated.voxel_size > plain.voxel_size  # fewer points: a coarser resolution
+
+
+class _Consensus:
+    """A stand-in descriptor that states its global step."""
+
+    registration_global_method_ = "consensus"
+
+
+def test_resolve_global_method():
+    assert resolve_global_method("auto") == DEFAULT_GLOBAL_METHOD == "ransac"
+    assert resolve_global_method("auto", FPFHTransformer()) == "ransac"
+    assert resolve_global_method("auto", _Consensus()) == "consensus"
+    assert resolve_global_method("fgr", _Consensus()) == "fgr"  # the call wins
+    assert resolve_global_method(None, _Consensus()) is None
+    step = RANSACGlobal()
+    assert resolve_global_method(step, _Consensus()) is step
+
+
+def test_register_runs_the_step_the_model_states(object_model):
+    cloud = make_object(1200, shape_seed=5)
+    moved = cloud + [0.05, 0.0, 0.0]
+    stated = object_model.__class__(**object_model.get_params())
+    stated.__dict__.update(object_model.__dict__)
+    stated.registration_global_method_ = "consensus"
+    auto = register(moved, cloud, stated)
+    assert "hypotheses" in auto.steps[0].info  # the consensus ran
+    plain = register(moved, cloud, object_model)
+    assert "hypotheses" not in plain.steps[0].info  # RANSAC ran
+    stated.registration_global_method_ = "magic"
+    with pytest.raises(ValueError, match="registration_global_method_ 'magic'"):
+        register(moved, cloud, stated)

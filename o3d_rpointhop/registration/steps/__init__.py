@@ -1,11 +1,13 @@
 """Registration steps, one module per algorithm: the global estimators :mod:`.svd`
 (the paper's one-shot SVD), :mod:`.ransac` (with its vectorised kernel in
-:mod:`._ransac`) and :mod:`.fgr`, the refinements in :mod:`.icp`, and
+:mod:`._ransac`), :mod:`.fgr` and :mod:`.consensus` (a correspondence graph, kernel in
+:mod:`._consensus`), the refinements in :mod:`.icp`, and
 :mod:`.symmetry`; :mod:`._base` holds the step base class and :mod:`._global` what the
 global steps share."""
 
 from ._base import OPTIONAL_DISTANCE, RegistrationStep
 from ._global import GlobalStep
+from .consensus import ConsensusGlobal
 from .fgr import FGRGlobal, tuple_test
 from .icp import GeneralizedICP, MultiScaleICP, PointToPlaneICP, PointToPointICP
 from .ransac import RANSACGlobal
@@ -14,6 +16,7 @@ from .symmetry import SymmetryCheck
 
 __all__ = [
     "OPTIONAL_DISTANCE",
+    "ConsensusGlobal",
     "FGRGlobal",
     "GeneralizedICP",
     "GlobalStep",

@@ -6,7 +6,7 @@ from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from ..context import RegistrationContext
 from ..result import StepResult
@@ -50,6 +50,12 @@ class RANSACGlobal(GlobalStep):
         Pairs per hypothesis (at least 3).
     edge_length : float, default=0.9
         Edge-length checker similarity in [0, 1) (0 disables the checker).
+    selection : {"fitness", "matches"}, default="fitness"
+        How the winner is chosen among the 64 hypotheses that carry the most matches:
+        ``"fitness"``, by the share of the whole source cloud it brings within the
+        inlier distance of the target (Open3D's rule), then refitted on those cloud
+        pairs; ``"matches"``, by the matches it carries (then their residuals), then
+        refitted on those matches, as correspondence-graph estimators score.
     """
 
     _parameter_constraints = {
@@ -61,6 +67,7 @@ class RANSACGlobal(GlobalStep):
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "ransac_n": [Interval(Integral, 3, None, closed="left")],
         "edge_length": [Interval(Real, 0, 1, closed="left")],
+        "selection": [StrOptions({"fitness", "matches"})],
     }
 
     def __init__(
@@ -74,6 +81,7 @@ class RANSACGlobal(GlobalStep):
         confidence: float = 0.999,
         ransac_n: int = 3,
         edge_length: float = 0.9,
+        selection: str = "fitness",
     ) -> None:
         self.descriptor = descriptor
         self.max_correspondence_distance = max_correspondence_distance
@@ -83,6 +91,7 @@ class RANSACGlobal(GlobalStep):
         self.confidence = confidence
         self.ransac_n = ransac_n
         self.edge_length = edge_length
+        self.selection = selection
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distance = self.max_correspondence_distance or context.settings.ransac_distance
@@ -98,7 +107,7 @@ class RANSACGlobal(GlobalStep):
             edge_length=float(self.edge_length),
             seed=context.seed,
             ransac_n=int(self.ransac_n),
-            clouds=(src, tgt),
+            clouds=(src, tgt) if self.selection == "fitness" else None,
         )
         check = context.evaluate(found.transformation, distance, which="global")
         check.name = "ransac"

@@ -1,0 +1,85 @@
+"""Compiled kernels with numba, compiled on first use.
+
+``import o3d_rpointhop`` does not import numba: :func:`kernel` returns a stand-in that
+imports numba, compiles the function (``cache=True``: the machine code is kept on disk,
+so later processes load it instead of compiling) and replaces itself on its first call.
+numba keeps its cache beside the module when that folder is writable and in the user's
+cache folder otherwise (``NUMBA_CACHE_DIR`` overrides both), so a read-only install
+works too.
+
+Threads: kernels declared ``parallel=True`` run on :func:`threads` threads, which the
+caller sets from its ``n_jobs`` (``numba.set_num_threads`` applies to the calling
+thread only, so joblib or Dask workers, which run with ``n_jobs=None``, use one thread
+each and never oversubscribe).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+__all__ = ["kernel", "prange", "threads"]
+
+_LOCK = threading.Lock()
+
+#: ``numba.prange`` inside a kernel: a kernel module imports this name, and compiling
+#: binds it to numba's parallel range (``range`` until then: numba is not imported).
+prange = range
+
+
+class _Kernel:
+    """A function compiled by ``numba.njit(**options)`` at its first call."""
+
+    def __init__(self, function: Callable, options: dict) -> None:
+        self.function = function
+        self.options = options
+        self.compiled: Callable | None = None
+        self.__name__ = function.__name__
+        self.__doc__ = function.__doc__
+
+    def __call__(self, *args: Any) -> Any:
+        if self.compiled is None:
+            with _LOCK:
+                if self.compiled is None:
+                    numba = _numba()
+                    if "prange" in self.function.__globals__:
+                        self.function.__globals__["prange"] = numba.prange
+                    self.compiled = numba.njit(cache=True, **self.options)(self.function)
+        return self.compiled(*args)
+
+
+def _numba():
+    """numba, with OpenMP preferred as its threading layer (the same runtime as Open3D's;
+    numba's TBB layer refuses the TBB versions found on common systems) unless the user
+    chose one (``NUMBA_THREADING_LAYER``)."""
+    import os
+
+    import numba
+
+    if "NUMBA_THREADING_LAYER" not in os.environ:
+        numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+    return numba
+
+
+def kernel(**options: Any) -> Callable[[Callable], _Kernel]:
+    """Decorator: compile with ``numba.njit(cache=True, **options)`` on first call."""
+
+    def wrap(function: Callable) -> _Kernel:
+        return _Kernel(function, options)
+
+    return wrap
+
+
+@contextmanager
+def threads(n_threads: int) -> Iterator[None]:
+    """Parallel kernels called inside run on ``n_threads`` threads (at most numba's
+    pool size), the calling thread's earlier setting restored on exit."""
+    numba = _numba()
+    previous = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)

@@ -1,0 +1,116 @@
+"""The correspondence-graph consensus: exact recovery among overwhelming outliers,
+determinism, bounded memory, flags on planar and symmetric input."""
+
+from __future__ import annotations
+
+import tracemalloc
+import warnings
+
+import numpy as np
+import pytest
+from helpers import motion_matrix, random_motion
+
+from o3d_rpointhop import ConsensusGlobal, RegistrationWarning, register
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.registration.steps._consensus import compatibility, consensus
+from o3d_rpointhop.transforms import apply_transform, rotation_error_deg, translation_error
+
+
+def synthetic_matches(n_matches: int, outlier_share: float, seed: int, noise: float = 0.002):
+    """Matches between two clouds of a 2 m room-sized box: a share of them true (the
+    source point moved by the motion, plus noise), the rest pairing random points."""
+    rng = np.random.default_rng(seed)
+    rot, shift = random_motion(seed, 1.0)
+    truth = motion_matrix(rot, shift)  # maps source into target
+    source = rng.uniform(-1.0, 1.0, (n_matches, 3))
+    target = apply_transform(source, truth) + rng.normal(scale=noise, size=(n_matches, 3))
+    n_out = int(round(outlier_share * n_matches))
+    wrong = rng.choice(n_matches, n_out, replace=False)
+    target[wrong] = apply_transform(rng.uniform(-1.0, 1.0, (n_out, 3)), truth)
+    return source, target, truth, np.isin(np.arange(n_matches), wrong, invert=True)
+
+
+@pytest.mark.parametrize("outlier_share", [0.95, 0.98, 0.99])
+def test_recovers_the_motion_among_overwhelming_outliers(outlier_share):
+    source, target, truth, _ = synthetic_matches(2000, outlier_share, seed=3)
+    found = consensus(
+        source,
+        target,
+        compatibility_threshold=0.02,
+        inlier_threshold=0.02,
+        score_threshold=0.03,
+    )
+    assert rotation_error_deg(found.transformation, truth) < 0.2
+    assert translation_error(found.transformation, truth) < 0.005
+    true_matches = int(round((1 - outlier_share) * 2000))
+    assert true_matches <= found.inliers.sum() <= true_matches + 5  # chance inliers only
+
+
+def test_the_same_matches_give_the_same_bytes():
+    source, target, _, _ = synthetic_matches(1500, 0.97, seed=5)
+    kwargs = dict(compatibility_threshold=0.02, inlier_threshold=0.02, score_threshold=0.03)
+    a = consensus(source, target, **kwargs)
+    b = consensus(source.copy(), target.copy(), **kwargs)
+    assert a.transformation.tobytes() == b.transformation.tobytes()
+    np.testing.assert_array_equal(a.inliers, b.inliers)
+
+
+def test_compatibility_joins_exact_matches_and_rarely_random_ones():
+    source, target, _, true = synthetic_matches(400, 0.5, seed=1, noise=0.0)
+    comp = compatibility(source, target, 1e-6)
+    np.testing.assert_array_equal(comp, comp.T)
+    assert comp.dtype == bool and not comp.diagonal().any()
+    exact = comp[np.ix_(true, true)]
+    assert exact.sum() == true.sum() * (true.sum() - 1)  # every pair of exact matches
+    assert comp[np.ix_(true, ~true)].mean() < 1e-3
+
+
+def test_memory_stays_bounded_at_the_match_cap():
+    """5000 matches (the cap) stay within a few megabytes: the compatibility graph is a
+    bit matrix (3 MB), the sets and scores are built per seed."""
+    source, target, truth, _ = synthetic_matches(5000, 0.98, seed=7)
+    tracemalloc.start()
+    found = consensus(
+        source, target, compatibility_threshold=0.02, inlier_threshold=0.02, score_threshold=0.03
+    )
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert rotation_error_deg(found.transformation, truth) < 0.2
+    assert peak < 40 * 1024**2
+
+
+def test_the_step_caps_its_matches_and_registers_an_object(object_model):
+    target = make_object(3000, shape_seed=12, sample_seed=1)
+    rot, shift = random_motion(4, 0.3)
+    source = make_object(3000, shape_seed=12, sample_seed=2) @ rot.T + shift
+    truth = np.linalg.inv(motion_matrix(rot, shift))
+    capped = ConsensusGlobal(both_directions=True, max_matches=1000)
+    result = register(source, target, object_model, global_method=capped, n_global_points=1500)
+    assert result.steps[0].info["candidate_matches"] == 1000
+    assert rotation_error_deg(result.transformation, truth) < 2.0
+    assert translation_error(result.transformation, truth) < 0.02
+    by_name = register(source, target, object_model, global_method="consensus", seed=0)
+    assert by_name.steps[0].name == "global" and "hypotheses" in by_name.steps[0].info
+
+
+def test_planar_and_symmetric_input_is_flagged(pretrained32):
+    rng = np.random.default_rng(0)
+    plane = np.c_[rng.uniform(-1, 1, (1500, 2)), np.zeros(1500)]
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    with pytest.warns(RegistrationWarning):
+        flat = register(plane, plane @ turn.T, pretrained32, global_method="consensus")
+    assert flat.ambiguous or not flat.converged
+    # A box is symmetric under half-turns about its axes.
+    box = rng.uniform(-1, 1, (3000, 3))
+    box[np.arange(3000), rng.integers(0, 3, 3000)] = np.sign(rng.normal(size=3000))
+    box *= [1.0, 0.6, 0.3]  # the surface of a 2 x 1.2 x 0.6 box
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RegistrationWarning)
+        symmetric = register(box, box @ turn.T, pretrained32, global_method="consensus")
+    assert symmetric.ambiguous
+
+
+def test_parameters_are_checked_with_the_step_named(object_model):
+    cloud = make_object(800)
+    with pytest.raises(ValueError, match="step 'global'.*'set_size' parameter"):
+        register(cloud, cloud, object_model, global_method=ConsensusGlobal(set_size=1))
