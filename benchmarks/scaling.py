@@ -4,10 +4,10 @@ Every measurement runs in a fresh process (so its peak resident memory is its ow
 interleaved R-PointHop / FPFH on the same cloud. The cloud is a synthetic CAD-like
 object (``make_object``) sampled at each size. FPFH runs at its full-cost setting:
 normals within 6x and histograms within 15x the point spacing, at most 30 and 100
-neighbours (Open3D, all cores). R-PointHop is the pretrained model projected on 32
-principal axes (``pretrained(n_components=32)``), on all cores (``n_jobs=-1``); the
-full 1624-D descriptor is measured too up to 200k points (at 1M its float32 output
-alone is 6.5 GB).
+neighbours (Open3D, all cores). R-PointHop is the pretrained model projected on 128
+principal axes (``pretrained(n_components=128)``, what ``register()`` matches) and on 32,
+on all cores (``n_jobs=-1``); the full 1624-D descriptor is measured too up to 200k
+points (at 1M its float32 output alone is 6.5 GB).
 
 Usage: python benchmarks/scaling.py [--sizes 2000 20000 200000 1000000] [--output DIR]
 Writes DIR/scaling.json, DIR/scaling.md and DIR/scaling.png.
@@ -25,6 +25,7 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
 METHODS = {
+    "rpointhop-128": "R-PointHop, pretrained, 128 principal axes, n_jobs=-1",
     "rpointhop-32": "R-PointHop, pretrained, 32 principal axes, n_jobs=-1",
     "rpointhop-full": "R-PointHop, pretrained, 1624-D, n_jobs=-1",
     "fpfh": "Open3D FPFH, normals 6x / histograms 15x the spacing, 30 / 100 neighbours",
@@ -63,7 +64,7 @@ def child(method: str, n: int, repeats: int) -> None:
             return np.asarray(feature.data).shape[::-1]
 
     else:
-        k = 32 if method == "rpointhop-32" else None
+        k = {"rpointhop-128": 128, "rpointhop-32": 32}.get(method)
         model = RPointHopTransformer.pretrained(n_components=k).set_params(n_jobs=-1)
 
         def run():
@@ -101,19 +102,34 @@ def measure(method: str, n: int, repeats: int) -> dict:
 
 
 def markdown(rows: list[dict], sizes: list[int]) -> str:
+    """Seconds (and the ratio to FPFH in the same run) and peak memory per size."""
     by = {(r["method"], r["points"]): r for r in rows}
+    variants = [
+        ("rpointhop-128", "128 axes"),
+        ("rpointhop-32", "32 axes"),
+        ("rpointhop-full", "1624-D"),
+    ]
     lines = [
-        "| points | R-PointHop (32 axes) s | FPFH s | time ratio | R-PointHop peak MB | "
-        "FPFH peak MB | R-PointHop 1624-D s | 1624-D peak MB |",
-        "|---|---|---|---|---|---|---|---|",
+        "| points | FPFH s | "
+        + " | ".join(f"R-PointHop {label} s (ratio)" for _, label in variants)
+        + " | peak MB: FPFH / "
+        + " / ".join(label for _, label in variants)
+        + " |",
+        "|---" * (len(variants) + 3) + "|",
     ]
     for n in sizes:
-        r, f, full = by.get(("rpointhop-32", n)), by.get(("fpfh", n)), by.get(("rpointhop-full", n))
+        fpfh = by.get(("fpfh", n))
+        cells, peaks = [], [f"{fpfh['peak_rss_mb']:.0f}"]
+        for method, _ in variants:
+            row = by.get((method, n))
+            if row is None:
+                cells.append("-")
+                peaks.append("-")
+                continue
+            cells.append(f"{row['seconds']:.2f} (**{row['seconds'] / fpfh['seconds']:.2f}x**)")
+            peaks.append(f"{row['peak_rss_mb']:.0f}")
         lines.append(
-            f"| {n:,} | {r['seconds']:.2f} | {f['seconds']:.2f} | "
-            f"**{r['seconds'] / f['seconds']:.2f}** | {r['peak_rss_mb']:.0f} | "
-            f"{f['peak_rss_mb']:.0f} | "
-            + (f"{full['seconds']:.2f} | {full['peak_rss_mb']:.0f} |" if full else "- | - |")
+            f"| {n:,} | {fpfh['seconds']:.2f} | " + " | ".join(cells) + f" | {' / '.join(peaks)} |"
         )
     return "\n".join(lines) + "\n"
 

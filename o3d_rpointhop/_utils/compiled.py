@@ -4,8 +4,8 @@
 imports numba, compiles the function (``cache=True``: the machine code is kept on disk,
 so later processes load it instead of compiling) and replaces itself on its first call.
 numba keeps its cache beside the module when that folder is writable and in the user's
-cache folder otherwise (``NUMBA_CACHE_DIR`` overrides both), so a read-only install
-works too.
+cache folder otherwise (``NUMBA_CACHE_DIR`` overrides both); with neither writable the
+kernel is compiled for the process alone, so a read-only install works too.
 
 Threads: kernels declared ``parallel=True`` run on :func:`threads` threads, which the
 caller sets from its ``n_jobs`` (``numba.set_num_threads`` applies to the calling
@@ -46,7 +46,15 @@ class _Kernel:
                     numba = _numba()
                     if "prange" in self.function.__globals__:
                         self.function.__globals__["prange"] = numba.prange
-                    self.compiled = numba.njit(cache=True, **self.options)(self.function)
+                    try:
+                        compiled = numba.njit(cache=True, **self.options)(self.function)
+                    except RuntimeError as exc:
+                        # No writable cache folder (a read-only install and no writable
+                        # home): compile for this process only.
+                        if "cannot cache" not in str(exc):
+                            raise
+                        compiled = numba.njit(**self.options)(self.function)
+                    self.compiled = compiled
         return self.compiled(*args)
 
 

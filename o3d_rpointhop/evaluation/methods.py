@@ -32,19 +32,22 @@ __all__ = ["DATASETS", "METHODS", "Method", "default_methods", "check_methods", 
 reg = o3d.pipelines.registration
 
 
+def fpfh_recipe_cloud(points, voxel):
+    """A cloud as Open3D's global registration tutorial prepares it: voxel-downsampled,
+    normals at 2 voxels, FPFH at 5 voxels; returns the cloud and its features."""
+    cloud = to_point_cloud(points).voxel_down_sample(voxel)
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+    feature = reg.compute_fpfh_feature(
+        cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    )
+    return cloud, feature
+
+
 def _fpfh_recipe_inputs(source, target, voxel):
-    def prepare(points):
-        cloud = to_point_cloud(points).voxel_down_sample(voxel)
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-        feature = reg.compute_fpfh_feature(
-            cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
-        )
-        return cloud, feature
-
-    return (*prepare(source), *prepare(target))
+    return (*fpfh_recipe_cloud(source, voxel), *fpfh_recipe_cloud(target, voxel))
 
 
-def _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
+def feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
     """Open3D's RANSAC on feature matches, as in its global registration tutorial."""
     distance = 1.5 * voxel
     o3d.utility.random.seed(seed)
@@ -68,7 +71,7 @@ def _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
 
 def _fpfh_ransac(source, target, voxel, seed):
     src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel)
-    return _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=True)
+    return feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=True)
 
 
 def open3d_recipe_descriptor():
@@ -86,7 +89,7 @@ def _rpointhop_open3d_ransac(source, target, voxel, seed, model):
     f_src = to_open3d_feature(model.transform(src))
     f_tgt = to_open3d_feature(model.transform(tgt))
     # mutual_filter=False: RANSAC does the filtering, and Open3D prints no fallback warning.
-    return _feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=False)
+    return feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=False)
 
 
 def _fpfh_fgr(source, target, voxel, seed):

@@ -39,7 +39,7 @@ from .quality import RegistrationWarning
 from .settings import RegistrationSettings
 from .steps import PointToPlaneICP, RANSACGlobal
 
-__all__ = ["MultiwayResult", "register_multiway"]
+__all__ = ["MultiwayResult", "common_voxel", "register_multiway"]
 
 reg = o3d.pipelines.registration
 
@@ -174,7 +174,7 @@ class MultiwayResult:
         }
 
 
-def _common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
+def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
     """One resolution for every scan: the largest that any scan needs, its own spacing
     widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
     voxel^2), so that no scan is finer than it can be described."""
@@ -410,7 +410,7 @@ def register_multiway(
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
-    voxel = _common_voxel(points, n_global_points)
+    voxel = common_voxel(points, n_global_points)
     settings = (settings or RegistrationSettings()).at(voxel)
     prepared = parallel_map(
         _prepare,

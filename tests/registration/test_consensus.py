@@ -55,6 +55,15 @@ def test_the_same_matches_give_the_same_bytes():
     np.testing.assert_array_equal(a.inliers, b.inliers)
 
 
+def test_the_thread_count_does_not_change_a_byte():
+    source, target, _, _ = synthetic_matches(1500, 0.97, seed=6)
+    kwargs = dict(compatibility_threshold=0.02, inlier_threshold=0.02, score_threshold=0.03)
+    one = consensus(source, target, n_threads=1, **kwargs)
+    two = consensus(source, target, n_threads=2, **kwargs)
+    assert one.transformation.tobytes() == two.transformation.tobytes()
+    np.testing.assert_array_equal(one.seeds, two.seeds)
+
+
 def test_compatibility_joins_exact_matches_and_rarely_random_ones():
     source, target, _, true = synthetic_matches(400, 0.5, seed=1, noise=0.0)
     comp = compatibility(source, target, 1e-6)

@@ -1,0 +1,67 @@
+"""Compiled kernels: compiled lazily, numba never imported by the package import, and a
+working fallback when no cache folder is writable."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+from o3d_rpointhop._utils import compiled
+
+
+def test_import_does_not_import_numba():
+    code = "import sys, o3d_rpointhop; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def _sum_of_squares(values):  # pragma: no cover - compiled
+    total = 0.0
+    for i in range(values.shape[0]):
+        total += values[i] * values[i]
+    return total
+
+
+def test_a_kernel_compiles_without_a_writable_cache(monkeypatch):
+    import numba
+
+    real = numba.njit
+    asked = []
+
+    def no_cache_folder(*args, **options):
+        asked.append(options.get("cache", False))
+        if options.get("cache"):
+            raise RuntimeError("cannot cache function '_sum_of_squares': no locator available")
+        return real(*args, **options)
+
+    monkeypatch.setattr(numba, "njit", no_cache_folder)
+    kernel = compiled.kernel()(_sum_of_squares)
+    assert kernel(np.arange(4.0)) == 14.0
+    assert asked[:2] == [True, False]  # tried the cache first, then compiled for the process
+
+
+def test_other_compile_errors_are_not_swallowed(monkeypatch):
+    import numba
+
+    def broken(*args, **options):
+        raise RuntimeError("something else")
+
+    monkeypatch.setattr(numba, "njit", broken)
+    kernel = compiled.kernel()(_sum_of_squares)
+    try:
+        kernel(np.arange(3.0))
+    except RuntimeError as exc:
+        assert "something else" in str(exc)
+    else:  # pragma: no cover - the test fails here
+        raise AssertionError("the compile error was swallowed")
+
+
+def test_threads_restores_the_callers_setting():
+    import numba
+
+    before = numba.get_num_threads()
+    with compiled.threads(1):
+        assert numba.get_num_threads() == 1
+    assert numba.get_num_threads() == before
