@@ -66,3 +66,37 @@ def test_point_to_point_has_no_kernel_and_bad_kernels_are_named(object_target):
         register(
             object_target, object_target, global_method=None, refine=PointToPlaneICP(kernel="fancy")
         )
+
+
+# ----------------------------------------------------------------------------- coverage guard
+def test_a_narrower_pass_that_loses_coverage_is_undone(object_target, monkeypatch):
+    """The fine pass is replaced by one that walks away; the coarse result must stand,
+    reported at the coarse distance."""
+    source, truth = moved_copy(object_target, 6, permute=False)
+    start = truth.copy()
+    start[:3, 3] += [0.01, 0.0, 0.0]
+    step = PointToPlaneICP()
+    solve = PointToPlaneICP._solve
+    calls = []
+
+    def wander(self, context, which, distance, init):
+        result = solve(self, context, which, distance, init)
+        calls.append(distance)
+        if len(calls) == 2:  # the fine pass: half a unit off
+            away = np.array(result.transformation)
+            away[:3, 3] += [0.5, 0.0, 0.0]
+            result.transformation = away
+        return result
+
+    monkeypatch.setattr(PointToPlaneICP, "_solve", wander)
+    result = register(source, object_target, global_method=None, refine=step, init=start)
+    assert result.steps[0].info["passes_undone"] == [1]
+    assert_close_pose(result.transformation, truth, 0.05, 1e-3)
+    assert result.steps[0].distance == calls[0]  # where the kept result was found
+    assert result.fitness > 0.9
+
+
+def test_passes_that_keep_coverage_are_kept(object_target):
+    source, truth = moved_copy(object_target, 6, permute=False)
+    result = register(source, object_target, global_method=None, refine="point_to_plane", init=truth)
+    assert result.steps[0].info["passes_undone"] == []

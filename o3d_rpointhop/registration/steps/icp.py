@@ -3,6 +3,13 @@
 Each starts from the incoming transformation and runs Open3D's ICP, repeatably (one
 thread), with correspondence distances from the step's parameters or, when they are
 ``None``, from ``context.settings`` (``icp_distances``: 2 then 0.5 resolutions).
+
+A narrower pass is kept only if it does not lose coverage: when its result brings
+:data:`COVERAGE_DROP` or more of the source fewer points within the previous pass's
+distance than the previous result did, the previous result stands (and is reported at
+that distance). On sparse clouds a
+pass narrower than the point spacing finds few correspondences and can walk away from
+an exact start (ModelNet40 resampled pairs: from 0.2-0.4 deg to 6-26 deg).
 """
 
 from __future__ import annotations
@@ -34,6 +41,16 @@ _POSITIVE = Interval(Real, 0, None, closed="neither")
 _ITERATIONS = [Interval(Integral, 1, None, closed="left")]
 _TOLERANCE = [Interval(Real, 0, None, closed="left")]
 _SCHEDULE = [None, _POSITIVE, "array-like"]
+
+#: A narrower ICP pass whose result covers this share of the source less (within the
+#: previous pass's distance) than the previous result is undone. Chosen on pairs of
+#: ModelNet40 *training* shapes (seed 7, success of register() with the ModelNet40 model
+#: / FPFH; no guard, then thresholds 0.01 / 0.05 / 0.1): resampled 69.4 / 70.1 / 70.1 /
+#: 70.1 % and 63.9 / 64.6 / 63.9 / 63.9 %, resampled-partial 43.8 / 44.4 / 44.4 / 44.4 %
+#: and 36.8 / 37.5 / 38.2 / 38.2 %, paper-partial 77.8 / 75.7 / 77.1 / 77.8 % and 85.4 /
+#: 84.0 / 84.7 / 85.4 %: at 0.1 no protocol loses a pair (a legitimate fine pass on a
+#: partial overlap drops up to 9 % of the source), three gain.
+COVERAGE_DROP = 0.1
 
 
 def _robust_kernel(kernel: str | None, scale: float | None, distance: float):
@@ -91,6 +108,14 @@ def _icp(method: str, source, target, distance: float, init, estimation, criteri
         return run(source, target, distance, init, estimation, criteria)
 
 
+def _loses_coverage(context, which: str, before, after, distance: float) -> bool:
+    """Whether ``after`` brings :data:`COVERAGE_DROP` or more of the source fewer points
+    within ``distance`` of the target than ``before`` does."""
+    old = context.evaluate(before, distance, which).fitness
+    new = context.evaluate(after, distance, which).fitness
+    return new < old - COVERAGE_DROP
+
+
 class _ICPStep(RegistrationStep):
     """Shared parameters, schedule and checks of the single-scale ICP steps."""
 
@@ -126,14 +151,30 @@ class _ICPStep(RegistrationStep):
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distances = _distances(self.max_correspondence_distance, context)
         current = transformation
+        undone = []
         for k, distance in enumerate(distances):
             # Wide passes on the global clouds: at their resolution they see the same
             # correspondences for far less work. The last pass is always on the full ones.
             coarse = context.downsampled and distance > context.voxel_size
             which = "global" if coarse and k < len(distances) - 1 else "full"
             result = self._solve(context, which, distance, current)
-            current = np.array(result.transformation)
-        info = {"max_correspondence_distance": distances, "kernel": getattr(self, "kernel", None)}
+            moved = np.array(result.transformation)
+            if k and distance < distances[k - 1] and _loses_coverage(
+                context, which, current, moved, distances[k - 1]
+            ):
+                # The result is reported where it was found: at the previous distance.
+                undone.append(k)
+                result = context.evaluate(current, distances[k - 1], which)
+                continue
+            current = moved
+        info = {
+            "max_correspondence_distance": distances,
+            "kernel": getattr(self, "kernel", None),
+            "passes_undone": undone,
+        }
+        if isinstance(result, StepResult):
+            result.name, result.info = self.name, info
+            return result
         return StepResult.from_open3d(self.name, result, 0.0, info, distances[-1])
 
 
