@@ -98,5 +98,7 @@ def test_a_narrower_pass_that_loses_coverage_is_undone(object_target, monkeypatc
 
 def test_passes_that_keep_coverage_are_kept(object_target):
     source, truth = moved_copy(object_target, 6, permute=False)
-    result = register(source, object_target, global_method=None, refine="point_to_plane", init=truth)
+    result = register(
+        source, object_target, global_method=None, refine="point_to_plane", init=truth
+    )
     assert result.steps[0].info["passes_undone"] == []

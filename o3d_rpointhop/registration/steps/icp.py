@@ -159,8 +159,10 @@ class _ICPStep(RegistrationStep):
             which = "global" if coarse and k < len(distances) - 1 else "full"
             result = self._solve(context, which, distance, current)
             moved = np.array(result.transformation)
-            if k and distance < distances[k - 1] and _loses_coverage(
-                context, which, current, moved, distances[k - 1]
+            if (
+                k
+                and distance < distances[k - 1]
+                and _loses_coverage(context, which, current, moved, distances[k - 1])
             ):
                 # The result is reported where it was found: at the previous distance.
                 undone.append(k)
