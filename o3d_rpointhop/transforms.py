@@ -6,6 +6,7 @@ import numpy as np
 
 __all__ = [
     "rigid_transform",
+    "rigid_transforms",
     "apply_transform",
     "rotation_error_deg",
     "translation_error",
@@ -65,6 +66,42 @@ def rigid_transform(
     out[:3, :3] = rotation
     out[:3, 3] = mu_t - rotation @ mu_s
     return out
+
+
+def rigid_transforms(
+    source: np.ndarray, target: np.ndarray, weights: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Many least-squares rigid fits at once, the batched form of :func:`rigid_transform`
+    without its checks (for the global steps' hypotheses).
+
+    Parameters
+    ----------
+    source, target : ndarray of shape (b, k, 3)
+        ``b`` sets of ``k`` matched points.
+    weights : ndarray of shape (b, k), default=None
+        Per-point weights of each set (normalised here); ``None`` weighs points equally.
+
+    Returns
+    -------
+    rotations : ndarray of shape (b, 3, 3)
+    translations : ndarray of shape (b, 3)
+        ``target[i] ~ source[i] @ rotations[i].T + translations[i]``.
+    """
+    if weights is None:
+        cs, ct = source.mean(axis=1), target.mean(axis=1)
+        cov = np.einsum("bki,bkj->bij", source - cs[:, None], target - ct[:, None])
+    else:
+        w = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-12)
+        cs = np.einsum("bk,bki->bi", w, source)
+        ct = np.einsum("bk,bki->bi", w, target)
+        cov = np.einsum("bk,bki,bkj->bij", w, source - cs[:, None], target - ct[:, None])
+    u, _, vt = np.linalg.svd(cov)
+    # A reflection, should the SVD return one, is fixed by flipping the last direction.
+    d = np.sign(np.linalg.det(np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))))
+    d[d == 0] = 1.0
+    vt[:, 2, :] *= d[:, None]
+    rot = np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))
+    return rot, ct - np.einsum("bij,bj->bi", rot, cs)
 
 
 def apply_transform(points: np.ndarray, transformation: np.ndarray) -> np.ndarray:

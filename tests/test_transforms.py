@@ -72,3 +72,22 @@ def test_rigid_transform_bad_input(src, tgt, message):
 def test_unmoved_input_is_applied_by_apply_transform(target):
     t = motion_matrix(*random_motion(1))
     np.testing.assert_allclose(apply_transform(target, t), target @ t[:3, :3].T + t[:3, 3])
+
+
+def test_batched_fits_agree_with_the_single_fit():
+    from scipy.spatial.transform import Rotation
+
+    from o3d_rpointhop.transforms import rigid_transform, rigid_transforms
+
+    rng = np.random.default_rng(4)
+    source = rng.normal(size=(5, 12, 3))
+    rot = Rotation.random(5, random_state=5).as_matrix()
+    target = np.einsum("bij,bkj->bki", rot, source) + rng.normal(size=(5, 1, 3))
+    target += rng.normal(scale=0.01, size=target.shape)
+    weights = rng.uniform(0.1, 1.0, size=(5, 12))
+    for w in (None, weights):
+        rots, shifts = rigid_transforms(source, target, w)
+        for b in range(5):
+            single = rigid_transform(source[b], target[b], None if w is None else w[b])
+            np.testing.assert_allclose(rots[b], single[:3, :3], atol=1e-12)
+            np.testing.assert_allclose(shifts[b], single[:3, 3], atol=1e-12)

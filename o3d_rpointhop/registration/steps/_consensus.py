@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._utils.compiled import kernel, prange, threads
-from ...transforms import rigid_transform
+from ...transforms import rigid_transform, rigid_transforms
 
 __all__ = ["ConsensusResult", "compatibility", "consensus"]
 
@@ -171,25 +171,17 @@ def compatibility(source: np.ndarray, target: np.ndarray, threshold: float) -> n
     return dense[:, :m].astype(bool)
 
 
-def _weighted_kabsch(src: np.ndarray, tgt: np.ndarray, w: np.ndarray):
-    """Rotations ``(b, 3, 3)`` and translations ``(b, 3)`` of weighted fits of sets
-    ``(b, k, 3)`` with weights ``(b, k)``."""
-    w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
-    cs = np.einsum("bk,bki->bi", w, src)
-    ct = np.einsum("bk,bki->bi", w, tgt)
-    cov = np.einsum("bk,bki,bkj->bij", w, src - cs[:, None], tgt - ct[:, None])
-    u, _, vt = np.linalg.svd(cov)
-    d = np.sign(np.linalg.det(np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))))
-    d[d == 0] = 1.0
-    vt[:, 2, :] *= d[:, None]
-    rot = np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))
-    return rot, ct - np.einsum("bij,bj->bi", rot, cs)
+def _within(transformation, source, target, sq_threshold) -> np.ndarray:
+    """Matches whose residual under ``transformation`` is below the threshold."""
+    moved = source @ transformation[:3, :3].T + transformation[:3, 3]
+    return ((moved - target) ** 2).sum(axis=1) < sq_threshold
 
 
 def _refit(transformation, source, target, sq_threshold, rounds: int = 20):
-    """Refit on the inlier matches while that gathers more of them."""
+    """Refit on the inlier matches while that gathers more of them; returns the fit and
+    its inliers."""
     best = transformation
-    inside = ((source @ best[:3, :3].T + best[:3, 3] - target) ** 2).sum(axis=1) < sq_threshold
+    inside = _within(best, source, target, sq_threshold)
     for _ in range(rounds):
         if inside.sum() < 3:
             break
@@ -197,8 +189,7 @@ def _refit(transformation, source, target, sq_threshold, rounds: int = 20):
             refit = rigid_transform(source[inside], target[inside])
         except ValueError:  # collinear inliers: keep what there is
             break
-        more = ((source @ refit[:3, :3].T + refit[:3, 3] - target) ** 2).sum(axis=1)
-        more = more < sq_threshold
+        more = _within(refit, source, target, sq_threshold)
         if more.sum() < inside.sum():
             break
         grew = more.sum() > inside.sum()
@@ -262,16 +253,15 @@ def consensus(
             partners, weights = _consensus_sets(bits, seeds, k)
             members = np.concatenate([seeds[:, None], partners], axis=1)
             weights = np.concatenate([weights.max(axis=1, keepdims=True), weights], axis=1)
-            rot, shift = _weighted_kabsch(source[members], target[members], weights)
+            rot, shift = rigid_transforms(source[members], target[members], weights)
             rot, shift = np.ascontiguousarray(rot), np.ascontiguousarray(shift)
             sq_score = float(score_threshold) ** 2
             score = _truncated_scores(rot, shift, source, target, sq_score)
         best = int(np.argmax(score))  # the first of equal scores: deterministic
         transformation[:3, :3], transformation[:3, 3] = rot[best], shift[best]
-        transformation, _ = _refit(transformation, source, target, inlier_threshold**2)
-    inliers = ((source @ transformation[:3, :3].T + transformation[:3, 3] - target) ** 2).sum(
-        axis=1
-    ) < inlier_threshold * inlier_threshold
+        transformation, inliers = _refit(transformation, source, target, inlier_threshold**2)
+    else:
+        inliers = _within(transformation, source, target, inlier_threshold**2)
     # Back from the centred frame: x -> R (x - c) + t + c.
     transformation[:3, 3] += centre - transformation[:3, :3] @ centre
     return ConsensusResult(

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ...transforms import rigid_transform
+from ...transforms import rigid_transform, rigid_transforms
 
 __all__ = ["RansacResult", "ransac"]
 
@@ -50,18 +50,6 @@ class RansacResult:
     transformation: np.ndarray
     inliers: np.ndarray
     iterations: int
-
-
-def _kabsch(src: np.ndarray, tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotations ``(b, 3, 3)`` and translations ``(b, 3)`` fitting samples ``(b, n, 3)``."""
-    cs, ct = src.mean(axis=1), tgt.mean(axis=1)
-    cov = np.einsum("bki,bkj->bij", src - cs[:, None], tgt - ct[:, None])
-    u, _, vt = np.linalg.svd(cov)
-    d = np.sign(np.linalg.det(np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))))
-    d[d == 0] = 1.0
-    vt[:, 2, :] *= d[:, None]
-    rot = np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))
-    return rot, ct - np.einsum("bij,bj->bi", rot, cs)
 
 
 def _residuals(rot, shift, src, tgt) -> np.ndarray:
@@ -223,7 +211,7 @@ def ransac(
             src, tgt = src[ok], tgt[ok]
         if not len(src):
             continue
-        rot, shift = _kabsch(src, tgt)
+        rot, shift = rigid_transforms(src, tgt)
         moved = np.einsum("bij,bkj->bki", rot, src) + shift[:, None, :]
         ok = (((moved - tgt) ** 2).sum(axis=2) < sq_threshold).all(axis=1)
         rot, shift = rot[ok], shift[ok]

@@ -108,14 +108,6 @@ def _icp(method: str, source, target, distance: float, init, estimation, criteri
         return run(source, target, distance, init, estimation, criteria)
 
 
-def _loses_coverage(context, which: str, before, after, distance: float) -> bool:
-    """Whether ``after`` brings :data:`COVERAGE_DROP` or more of the source fewer points
-    within ``distance`` of the target than ``before`` does."""
-    old = context.evaluate(before, distance, which).fitness
-    new = context.evaluate(after, distance, which).fitness
-    return new < old - COVERAGE_DROP
-
-
 class _ICPStep(RegistrationStep):
     """Shared parameters, schedule and checks of the single-scale ICP steps."""
 
@@ -159,15 +151,15 @@ class _ICPStep(RegistrationStep):
             which = "global" if coarse and k < len(distances) - 1 else "full"
             result = self._solve(context, which, distance, current)
             moved = np.array(result.transformation)
-            if (
-                k
-                and distance < distances[k - 1]
-                and _loses_coverage(context, which, current, moved, distances[k - 1])
-            ):
-                # The result is reported where it was found: at the previous distance.
-                undone.append(k)
-                result = context.evaluate(current, distances[k - 1], which)
-                continue
+            if k and distance < distances[k - 1]:
+                # Coverage within the previous pass's distance, before and after this one.
+                before = context.evaluate(current, distances[k - 1], which)
+                after = context.evaluate(moved, distances[k - 1], which)
+                if after.fitness < before.fitness - COVERAGE_DROP:
+                    # Undone; the result is reported where it was found.
+                    undone.append(k)
+                    result = before
+                    continue
             current = moved
         info = {
             "max_correspondence_distance": distances,
