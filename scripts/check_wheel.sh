@@ -8,6 +8,9 @@ cd "$(dirname "$0")/.."
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 echo "wheel check: building"
+# setuptools copies sources into ./build and keeps files it copied before: a module
+# deleted from the package would still be shipped. Start from an empty build folder.
+rm -rf build
 .venv/bin/python -m pip wheel -q --disable-pip-version-check --no-deps -w "$work/dist" . \
     > "$work/build.log" 2>&1 || { cat "$work/build.log" >&2; exit 1; }
 echo "wheel check: installing $(basename "$work"/dist/*.whl) in a fresh environment"
