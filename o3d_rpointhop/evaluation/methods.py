@@ -204,10 +204,12 @@ def _fpfh_pipeline(**options):
 
 
 def kiss_matcher_available() -> bool:
-    """Whether the optional KISS-Matcher wheel is installed."""
-    from importlib.util import find_spec
-
-    return find_spec("kiss_matcher") is not None
+    """Whether the optional KISS-Matcher wheel is installed and imports."""
+    try:
+        import kiss_matcher  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def _run_kiss_matcher(source, target, descriptor, voxel, seed):
