@@ -55,12 +55,20 @@ class CloudGeometry:
     """
 
     n_points: int
-    hop1_attributes: np.ndarray
-    poolings: list[OctantPooling]
+    hop1_attributes: np.ndarray | None
+    poolings: list[OctantPooling | None]
 
     @property
     def nbytes(self) -> int:
-        return self.hop1_attributes.nbytes + sum(p.nbytes for p in self.poolings)
+        parts = [self.hop1_attributes, *self.poolings]
+        return sum(p.nbytes for p in parts if p is not None)
+
+    def release(self, hop: int) -> None:
+        """Drop the structure that enters ``hop`` (0-based) once it has been used."""
+        if hop == 0:
+            self.hop1_attributes = None
+        else:
+            self.poolings[hop - 1] = None
 
 
 def cloud_scale(mean_dist: np.ndarray, scale: str | float) -> float:
@@ -93,8 +101,10 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
     (``config.shortfall(len(points))`` is None: the estimator checks it).
 
     Neighbourhoods are searched and expressed in their frames
-    :data:`GEOMETRY_CHUNK` queries at a time, and only their octants and neighbour rows
-    are kept (5 bytes per neighbour), so memory grows linearly with the cloud.
+    :data:`GEOMETRY_CHUNK` queries at a time; a hop's octants and neighbour rows (5
+    bytes per neighbour) are kept only until its pooling operator (4 bytes per
+    neighbour) is built, and hop 1's only when the scene attributes need them, so
+    memory grows linearly with the cloud.
 
     Parameters
     ----------
@@ -117,8 +127,14 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
     full = [h for h in range(n_hops) if len(sources[h]) == n]
     k_lrf = config.lrf_neighbors
     k_all = max([k_lrf] + [config.n_neighbors[h] + 1 for h in full])
-    octants = [np.empty((len(queries[h]), config.n_neighbors[h]), np.uint8) for h in range(n_hops)]
-    neighbours = [np.empty(o.shape, np.int32) for o in octants]
+    # Hop 1's neighbours are pooled into its attributes right away; the scene
+    # attributes need them again once every frame is known.
+    keep = [h for h in full if h > 0 or len(config.attributes) > 1]
+    octants = [None] * n_hops
+    neighbours = [None] * n_hops
+    for h in keep:
+        octants[h] = np.empty((len(queries[h]), config.n_neighbors[h]), np.uint8)
+        neighbours[h] = np.empty(octants[h].shape, np.int32)
     hop1_sums = np.empty((len(queries[0]), 24))
     frames = np.empty((n, 3, 3))
     eigenvalues = np.empty((n, 3)) if "eigen" in config.attributes else None
@@ -148,31 +164,38 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
             rows = queries[h][lo:hi] - start
             # Every query belongs to the searched cloud, so its first hit is itself.
             block = local[:, rows, 1 : k + 1]
-            octants[h][lo:hi] = octant_index(block)
-            neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
+            octant = octant_index(block)
+            if h in keep:
+                octants[h][lo:hi] = octant
+                neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
             if h == 0:
-                hop1_sums[lo:hi] = octant_means(block, octants[h][lo:hi])
-        del nn_idx, nn_sq, offsets, local
-    for h in range(n_hops):
-        if h in full:
-            continue
+                hop1_sums[lo:hi] = octant_means(block, octant)
+        del nn_idx, nn_sq, offsets, local, block, octant
+    del index
+    poolings: list[OctantPooling | None] = [None] * (n_hops - 1)
+    for h in range(1, n_hops):
         k, src, qry = config.n_neighbors[h], sources[h], queries[h]
-        src_index = NeighborIndex(points[src])
-        for lo in range(0, len(qry), GEOMETRY_CHUNK):
-            hi = min(len(qry), lo + GEOMETRY_CHUNK)
-            idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
-            nb = drop_self(idx, sq, k)
-            offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
-            octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
-            neighbours[h][lo:hi] = nb
-    length = cloud_scale(mean_dist, config.scale)
-    hop1 = hop1_sums / length
+        if h not in full:
+            octants[h] = np.empty((len(qry), k), np.uint8)
+            neighbours[h] = np.empty(octants[h].shape, np.int32)
+            src_index = NeighborIndex(points[src])
+            for lo in range(0, len(qry), GEOMETRY_CHUNK):
+                hi = min(len(qry), lo + GEOMETRY_CHUNK)
+                idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
+                nb = drop_self(idx, sq, k)
+                offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
+                octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
+                neighbours[h][lo:hi] = nb
+            del src_index
+        poolings[h - 1] = OctantPooling(octants[h], neighbours[h], len(src))
+        octants[h] = neighbours[h] = None
+    hop1_sums /= cloud_scale(mean_dist, config.scale)
+    hop1 = hop1_sums
     if len(config.attributes) > 1:
         extra = _neighbour_attributes(
             config.attributes, queries[0], neighbours[0], octants[0], frames, eigenvalues
         )
         hop1 = np.hstack([hop1, extra])
-    poolings = [OctantPooling(octants[h], neighbours[h], len(sources[h])) for h in range(1, n_hops)]
     return CloudGeometry(n_points=n, hop1_attributes=hop1, poolings=poolings)
 
 

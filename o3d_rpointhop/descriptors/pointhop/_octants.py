@@ -95,9 +95,11 @@ class OctantPooling:
 
     The operator is kept as consecutive blocks of :data:`QUERY_BLOCK` queries: pooling
     and reordering a block while it is in the CPU cache is much faster than doing so for
-    the whole pooled tensor, which for the last hop is several megabytes. It is built
-    :data:`BUILD_CHUNK` queries at a time, so building it needs memory for its own arrays
-    (8 bytes per neighbour) and little more.
+    the whole pooled tensor, which for the last hop is several megabytes. It stores each
+    query's neighbour rows sorted by octant and the octant counts (4 bytes per
+    neighbour and 32 per query); a block's weights are made from the counts when it is
+    pooled. It is built :data:`BUILD_CHUNK` queries at a time, so building it needs
+    little memory beyond its own arrays.
 
     Parameters
     ----------
@@ -111,7 +113,6 @@ class OctantPooling:
     def __init__(self, octant: np.ndarray, neighbors: np.ndarray, n_sources: int) -> None:
         q, k = octant.shape
         index_type = np.int32 if max(n_sources, q * k) < 2**31 else np.int64
-        data = np.empty(q * k, dtype=DTYPE)
         indices = np.empty(q * k, dtype=index_type)
         counts = np.empty((q, N_OCTANTS), dtype=np.int32)
         for lo in range(0, q, BUILD_CHUNK):
@@ -124,46 +125,47 @@ class OctantPooling:
             # permutes the output exactly.
             within = np.argsort(oct_block, axis=1, kind="stable")
             rows = (np.arange(hi - lo)[:, None] * N_OCTANTS + oct_block).ravel()
-            block_counts = np.bincount(rows, minlength=N_OCTANTS * (hi - lo)).reshape(
+            counts[lo:hi] = np.bincount(rows, minlength=N_OCTANTS * (hi - lo)).reshape(
                 hi - lo, N_OCTANTS
             )
-            counts[lo:hi] = block_counts
-            sorted_octants = np.take_along_axis(oct_block, within, axis=1)
-            weights = (1.0 / np.maximum(block_counts, 1)).astype(DTYPE)
-            data[lo * k : hi * k] = np.take_along_axis(weights, sorted_octants, axis=1).ravel()
             indices[lo * k : hi * k] = np.take_along_axis(neighbors[lo:hi], within, axis=1).ravel()
         indptr = np.zeros(N_OCTANTS * q + 1, dtype=index_type)
         np.cumsum(counts.ravel(), out=indptr[1:])
         self.n_queries = q
         self.n_sources = n_sources
-        self._arrays = (data, indices, indptr)
-        self.fill_weights = (counts / k).astype(DTYPE)  # (q, 8): share of each octant
-        self.empty = counts == 0  # (q, 8)
+        self.n_neighbors = k
+        self._indices = indices
+        self._indptr = indptr
+        self._counts = counts
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in self._arrays) + self.fill_weights.nbytes + self.empty.nbytes
+        return self._indices.nbytes + self._indptr.nbytes + self._counts.nbytes
 
     def _block(self, start: int, stop: int) -> sp.csr_matrix:
-        data, indices, indptr = self._arrays
-        lo, hi = indptr[start * N_OCTANTS], indptr[stop * N_OCTANTS]
+        """Rows of queries ``start:stop``, each neighbour weighted by one over its
+        octant's count (float32, as the features)."""
+        indptr = self._indptr[start * N_OCTANTS : stop * N_OCTANTS + 1]
+        counts = self._counts[start:stop].ravel()
+        weights = (1.0 / np.maximum(counts, 1)).astype(DTYPE)
+        lo, hi = indptr[0], indptr[-1]
         return sp.csr_matrix(
-            (data[lo:hi], indices[lo:hi], indptr[start * N_OCTANTS : stop * N_OCTANTS + 1] - lo),
+            (np.repeat(weights, counts), self._indices[lo:hi], indptr - lo),
             shape=((stop - start) * N_OCTANTS, self.n_sources),
         )
 
-    def _pool_block(self, start: int, stop: int, sources_major: np.ndarray) -> np.ndarray:
+    def _pool_block(self, start: int, stop: int, features: np.ndarray) -> np.ndarray:
         """Octant means of one block of queries: ``(n_channels, 8, stop - start)``."""
-        n_channels = sources_major.shape[1]
-        pooled = (self._block(start, stop) @ sources_major).reshape(
-            stop - start, N_OCTANTS, n_channels
-        )
-        empty = self.empty[start:stop]
+        n_channels = features.shape[1]
+        pooled = (self._block(start, stop) @ features).reshape(stop - start, N_OCTANTS, n_channels)
+        counts = self._counts[start:stop]
+        empty = counts == 0
         if empty.any():
             # Empty octants take the neighbourhood mean: the count-weighted mean of the
             # octant means (a batched product over queries, so every query's sum runs the
             # same way wherever it sits).
-            whole = np.matmul(self.fill_weights[start:stop, None, :], pooled)[:, 0]
+            fill = (counts / self.n_neighbors).astype(DTYPE)
+            whole = np.matmul(fill[:, None, :], pooled)[:, 0]
             qi, oi = np.nonzero(empty)
             pooled[qi, oi] = whole[qi]
         return np.ascontiguousarray(pooled.transpose(2, 1, 0))
@@ -180,18 +182,19 @@ class OctantPooling:
 
         Parameters
         ----------
-        features : ndarray of shape (n_channels, n_sources)
+        features : ndarray of shape (n_sources, n_channels)
+            One row per source point (copied only if not C-contiguous).
         consume : callable
         n_threads : int, default=1
         """
-        sources_major = np.ascontiguousarray(features.T)  # (n_sources, c)
+        features = np.ascontiguousarray(features)
         bounds = [
             (start, min(self.n_queries, start + QUERY_BLOCK))
             for start in range(0, self.n_queries, QUERY_BLOCK)
         ]
 
         def run(bound):
-            consume(bound[0], bound[1], self._pool_block(bound[0], bound[1], sources_major))
+            consume(bound[0], bound[1], self._pool_block(bound[0], bound[1], features))
 
         # A thread pays off only with enough blocks to share (measured: two threads on a
         # 2000-point cloud are slower than one).
@@ -205,8 +208,8 @@ class OctantPooling:
                 future.result()
 
     def __call__(self, features: np.ndarray, n_threads: int = 1) -> np.ndarray:
-        """Pool features ``(n_channels, n_sources)`` into ``(n_channels, 8, q)``."""
-        out = np.empty((features.shape[0], N_OCTANTS, self.n_queries), dtype=features.dtype)
+        """Pool features ``(n_sources, n_channels)`` into ``(n_channels, 8, q)``."""
+        out = np.empty((features.shape[1], N_OCTANTS, self.n_queries), dtype=features.dtype)
 
         def store(start, stop, pooled):
             out[:, :, start:stop] = pooled

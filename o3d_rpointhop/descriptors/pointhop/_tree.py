@@ -109,7 +109,8 @@ class HopTree:
                         if i in cache
                         else tree.forward(geometry, hop - 1, n_threads)
                     )
-                    moments.update(tree.hop(hop - 1, geometry, previous, n_threads)[None])
+                    last = tree.hop(hop - 1, geometry, previous, n_threads)
+                    moments.update(np.ascontiguousarray(last.T)[None])
                 else:
                     previous = (
                         features.get(i) if i in cache else tree.forward(geometry, hop, n_threads)
@@ -202,32 +203,44 @@ class HopTree:
     def hop(
         self, hop: int, geometry: CloudGeometry, previous: np.ndarray | None, n_threads: int
     ) -> np.ndarray:
-        """Outputs of ``hop`` (0-based) that go on, float32 ``(n_selected, n_queries)``."""
+        """Outputs of ``hop`` (0-based) that go on, one row per query: float32
+        ``(n_queries, n_selected)``, the layout the next hop's pooling reads."""
         selected = self.selected[hop]
         if hop == 0:
             attrs = _hop_inputs(0, geometry, None)
             out = apply_saab(attrs, self.kernels[0], self.means[0])
-            return out.reshape(-1, out.shape[2])[selected]
+            return np.ascontiguousarray(out.reshape(-1, out.shape[2])[selected].T)
         pooling = geometry.poolings[hop - 1]
-        out = np.empty((selected.size, pooling.n_queries), dtype=np.float32)
-        pooling.map_blocks(previous, self._block_writer(hop, out, transposed=False), n_threads)
+        out = np.empty((pooling.n_queries, selected.size), dtype=np.float32)
+        pooling.map_blocks(previous, self._block_writer(hop, out), n_threads)
         return out
 
     def forward(
-        self, geometry: CloudGeometry, n_hops: int | None = None, n_threads: int = 1
+        self,
+        geometry: CloudGeometry,
+        n_hops: int | None = None,
+        n_threads: int = 1,
+        *,
+        release: bool = False,
     ) -> np.ndarray:
         """Run the first ``n_hops`` hops (all by default) on a cloud's geometry; return
-        the last one's output, ``(n_selected, n_queries)``."""
+        the last one's output, ``(n_queries, n_selected)``.
+
+        With ``release``, each hop's structure is dropped from ``geometry`` once used,
+        so a large cloud's memory peaks lower (the geometry cannot be reused).
+        """
         n_hops = len(self.kernels) if n_hops is None else n_hops
         feats = None
         for hop in range(n_hops):
             feats = self.hop(hop, geometry, feats, n_threads)
+            if release:
+                geometry.release(hop)
         return feats
 
-    def _block_writer(self, hop: int, out: np.ndarray, transposed: bool, projection=None, bar=None):
+    def _block_writer(self, hop: int, out: np.ndarray, projection=None, bar=None):
         """A ``consume`` for :meth:`OctantPooling.map_blocks`: Saab-transform a block and
-        store its selected outputs in ``out[:, start:stop]`` (or, ``transposed``, in rows
-        ``out[start:stop]``, projected on ``projection = (mean, axes)`` if given)."""
+        store its selected outputs in rows ``out[start:stop]``, projected on
+        ``projection = (mean, axes)`` if given."""
         kernels, means, selected = self.kernels[hop], self.means[hop], self.selected[hop]
         keep_all = selected.size == kernels.shape[0] * kernels.shape[2]
 
@@ -242,10 +255,8 @@ class HopTree:
                 # cloud permutes the result (measured: no difference in 320k values).
                 mean, axes = projection
                 out[start:stop] = (block.T - mean) @ axes
-            elif transposed:
-                out[start:stop] = block.T
             else:
-                out[:, start:stop] = block
+                out[start:stop] = block.T
             if bar is not None:
                 bar.update(stop - start)
 
@@ -283,13 +294,13 @@ class HopTree:
         geometry = build_geometry(points, config, for_fit=False)
         last = len(self.kernels) - 1
         if last == 0:
-            out = np.ascontiguousarray(self.forward(geometry, n_threads=n_threads).T)
+            out = self.forward(geometry, n_threads=n_threads)
             if projection is not None:
                 out = ((out - projection[0]) @ projection[1]).astype(np.float32)
         else:
-            previous = self.forward(geometry, last, n_threads)
+            previous = self.forward(geometry, last, n_threads, release=True)
             out = np.empty((geometry.n_points, n_out), dtype=np.float32)
-            writer = self._block_writer(last, out, True, projection, bar)
+            writer = self._block_writer(last, out, projection, bar)
             geometry.poolings[last - 1].map_blocks(previous, writer, n_threads)
         if bar is not None:
             bar.close()
@@ -299,7 +310,7 @@ class HopTree:
 def _hop_inputs(hop: int, geometry: CloudGeometry, previous: np.ndarray | None) -> np.ndarray:
     """Attributes entering ``hop`` (0-based), channel-major float32
     ``(n_channels, dim, n_queries)``; ``previous`` is the former hop's output,
-    ``(n_channels, n_points)``."""
+    ``(n_points, n_channels)``."""
     if hop == 0:
         return geometry.hop1_attributes.T[None].astype(np.float32)
     return geometry.poolings[hop - 1](previous)

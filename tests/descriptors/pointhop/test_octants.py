@@ -40,7 +40,7 @@ def test_octant_pooling_against_loop():
     octant = octant_index(local)
     nb = np.stack([rng.choice(n_src, k, replace=False) for _ in range(q)])
     feats = rng.normal(size=(c, n_src)).astype(np.float32)
-    pooled = OctantPooling(octant, nb, n_src)(feats)
+    pooled = OctantPooling(octant, nb, n_src)(feats.T)
     assert pooled.shape == (c, 8, q)
     for i in range(q):
         whole = feats[:, nb[i]].mean(axis=1)
@@ -57,4 +57,4 @@ def test_octant_pooling_is_shift_equivariant():
     nb = rng.integers(0, 30, size=(8, 12))
     pool = OctantPooling(octant, nb, 30)
     feats = rng.normal(size=(4, 30)).astype(np.float32)
-    np.testing.assert_allclose(pool(feats + 7.0), pool(feats) + 7.0, rtol=1e-5)
+    np.testing.assert_allclose(pool(feats.T + 7.0), pool(feats.T) + 7.0, rtol=1e-5)
