@@ -18,6 +18,7 @@ from ..._utils.progress import progress_bar
 from ..._utils.threads import one_blas_thread
 from ._config import HopConfig
 from ._geometry import CloudGeometry, build_geometry
+from ._neighbors import spatial_order
 from ._saab import MomentAccumulator, apply_saab, fit_saab
 
 __all__ = ["HopTree"]
@@ -237,10 +238,10 @@ class HopTree:
                 geometry.release(hop)
         return feats
 
-    def _block_writer(self, hop: int, out: np.ndarray, projection=None, bar=None):
+    def _block_writer(self, hop: int, out: np.ndarray, projection=None, bar=None, rows=None):
         """A ``consume`` for :meth:`OctantPooling.map_blocks`: Saab-transform a block and
-        store its selected outputs in rows ``out[start:stop]``, projected on
-        ``projection = (mean, axes)`` if given."""
+        store its selected outputs in rows ``out[start:stop]`` (or ``out[rows[start:stop]]``),
+        projected on ``projection = (mean, axes)`` if given."""
         kernels, means, selected = self.kernels[hop], self.means[hop], self.selected[hop]
         keep_all = selected.size == kernels.shape[0] * kernels.shape[2]
 
@@ -248,15 +249,16 @@ class HopTree:
             block = apply_saab(attrs, kernels, means).reshape(-1, stop - start)
             if not keep_all:
                 block = block[selected]
+            target = slice(start, stop) if rows is None else rows[start:stop]
             if projection is not None:
                 # A BLAS product rounds a row by where it sits in the kernel's tiles. In
                 # float64 that is far below float32's resolution, so once rounded to
                 # float32 the rows come out the same wherever they sit: permuting the
                 # cloud permutes the result (measured: no difference in 320k values).
                 mean, axes = projection
-                out[start:stop] = (block.T - mean) @ axes
+                out[target] = (block.T - mean) @ axes
             else:
-                out[start:stop] = block.T
+                out[target] = block.T
             if bar is not None:
                 bar.update(stop - start)
 
@@ -273,10 +275,12 @@ class HopTree:
     ) -> np.ndarray:
         """One descriptor row per point of a validated cloud, float32.
 
-        The last hop is evaluated block by block, each block's outputs transposed into
-        their rows while still in cache (one transposed copy of the whole result would
-        cost about a quarter of the transform). BLAS runs on one thread meanwhile: the
-        blocks' threads are ``n_threads``, and nothing else.
+        The cloud is described in a spatial order (:func:`~._neighbors.spatial_order`;
+        the result does not depend on it) and the last hop is evaluated block by block,
+        each block's outputs transposed into their rows while still in cache (one
+        transposed copy of the whole result would cost about a quarter of the
+        transform). BLAS runs on one thread meanwhile: the blocks' threads are
+        ``n_threads``, and nothing else.
         """
         with one_blas_thread():
             return self._describe_blocks(points, config, n_components, n_threads, progress)
@@ -291,16 +295,18 @@ class HopTree:
             enabled=progress,
             large=len(points) >= 100_000,
         )
-        geometry = build_geometry(points, config, for_fit=False)
+        order = spatial_order(points)
+        geometry = build_geometry(points[order], config, for_fit=False)
         last = len(self.kernels) - 1
+        out = np.empty((geometry.n_points, n_out), dtype=np.float32)
         if last == 0:
-            out = self.forward(geometry, n_threads=n_threads)
+            described = self.forward(geometry, n_threads=n_threads)
             if projection is not None:
-                out = ((out - projection[0]) @ projection[1]).astype(np.float32)
+                described = (described - projection[0]) @ projection[1]
+            out[order] = described
         else:
             previous = self.forward(geometry, last, n_threads, release=True)
-            out = np.empty((geometry.n_points, n_out), dtype=np.float32)
-            writer = self._block_writer(last, out, projection, bar)
+            writer = self._block_writer(last, out, projection, bar, rows=order)
             geometry.poolings[last - 1].map_blocks(previous, writer, n_threads)
         if bar is not None:
             bar.close()

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import make_blob, make_object
-from o3d_rpointhop.descriptors.pointhop._neighbors import drop_self, knn
+from o3d_rpointhop.descriptors.pointhop._neighbors import drop_self, knn, spatial_order
 from o3d_rpointhop.descriptors.pointhop._sampling import (
     fps_subsets,
     hop_subsets,
@@ -124,3 +124,14 @@ def test_knn_and_drop_self():
     np.testing.assert_array_equal(drop_self(far_idx, far_sq, 4), far_idx[:, :4])
     with pytest.raises(ValueError, match="cannot take"):
         knn(pts[:3], pts, 5)
+
+
+def test_spatial_order_is_a_permutation_that_keeps_neighbours_together():
+    pts = make_blob(3000, shape_seed=13)
+    order = spatial_order(pts)
+    np.testing.assert_array_equal(np.sort(order), np.arange(3000))
+    step = np.linalg.norm(np.diff(pts[order], axis=0), axis=1).mean()
+    scattered = np.linalg.norm(np.diff(pts, axis=0), axis=1).mean()
+    assert step < scattered / 5  # consecutive points are near each other
+    # Points in one Morton cell stay in input order; a cloud without extent is kept.
+    np.testing.assert_array_equal(spatial_order(np.zeros((4, 3))), np.arange(4))

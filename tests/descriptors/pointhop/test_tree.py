@@ -82,6 +82,14 @@ def test_chunked_equals_unchunked(fitted, monkeypatch):
     np.testing.assert_array_equal(fitted.transform(cloud), whole)
 
 
+def test_descriptors_do_not_depend_on_the_internal_order(fitted, monkeypatch):
+    cloud = make_blob(900, shape_seed=14)
+    spatial = fitted.transform(cloud)
+    reverse = lambda points: np.arange(len(points))[::-1]  # noqa: E731
+    monkeypatch.setattr(tree_module, "spatial_order", reverse)
+    np.testing.assert_array_equal(fitted.transform(cloud), spatial)
+
+
 def test_threads_give_the_same_descriptors(fitted, monkeypatch):
     cloud = make_blob(900, shape_seed=12)
     one = fitted.transform(cloud)
