@@ -165,7 +165,7 @@ def main() -> None:
         return
     rows = []
     for n in args.sizes:
-        repeats = 5 if n <= 20_000 else 1
+        repeats = 21 if n <= 2_000 else 5 if n <= 20_000 else 1
         for method in METHODS:
             if method == "rpointhop-full" and n > FULL_MAX_POINTS:
                 continue

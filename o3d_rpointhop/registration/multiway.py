@@ -2,17 +2,17 @@
 
 Every scan is downsampled to one common resolution and described once. Candidate pairs
 (all pairs of a few scans; for many scans, each scan's nearest neighbours by a pooled
-descriptor) are registered through :class:`~o3d_rpointhop.RegistrationPipeline` on a
-context that holds the prepared clouds and descriptors, with ``register()``'s steps
-(descriptor matches, RANSAC, point-to-plane ICP), its centring, resolution rules and
-flags, then measured (fitness and Open3D's information matrix at the settings'
-``edge_distance``). Pairs
-that fit become edges of an Open3D ``PoseGraph``: a maximum spanning tree of the best
-edges gives the starting poses and is kept as certain, every other edge is a loop
-closure that Open3D's Levenberg-Marquardt optimisation may prune (line process). The
-optimised poses are refined once more (every kept edge re-registered by ICP from them,
-then optimised again). Scans that no kept edge joins to scan 0 are reported as
-unconnected and get no pose.
+descriptor) are screened through :class:`~o3d_rpointhop.RegistrationPipeline` on a
+context that holds the prepared clouds and descriptors, with ``register()``'s global
+step (descriptor matches, RANSAC), centring, resolution rules and flags, and one
+point-to-plane ICP pass at the common resolution, then measured there (fitness and
+Open3D's information matrix at the settings' ``edge_distance``). Pairs that fit become
+edges of an Open3D ``PoseGraph``: a maximum spanning tree of the best edges gives the
+starting poses and is kept as certain, every other edge is a loop closure that Open3D's
+Levenberg-Marquardt optimisation may prune (line process). The optimised poses are
+refined once more (every kept edge re-registered by ``register()``'s ICP from them,
+ending on the full scans, then optimised again). Scans that no kept edge joins to scan
+0 are reported as unconnected and get no pose.
 """
 
 from __future__ import annotations
@@ -202,8 +202,15 @@ class _Described:
         raise RuntimeError("the scans' descriptors were computed once, before the pairs")
 
 
-#: How a candidate pair is registered: as register() does by default.
-_PAIR_STEPS = (("global", RANSACGlobal()), ("refine", PointToPlaneICP()))
+def _pair_steps(settings: RegistrationSettings, screen: bool) -> list:
+    """How a pair is registered. Screening a candidate pair: ``register()``'s RANSAC,
+    then one point-to-plane ICP pass at the settings' widest ICP distance on the
+    global clouds (the common resolution). Refining a kept edge from the optimised
+    poses: ``register()``'s point-to-plane ICP, ending on the full scans."""
+    if screen:
+        coarse = PointToPlaneICP(settings.icp_distances[0], full_resolution=False)
+        return [("global", RANSACGlobal()), ("refine", coarse)]
+    return [("refine", PointToPlaneICP())]
 
 
 def _pair_context(source, target, prepared_source, prepared_target, settings, seed):
@@ -229,22 +236,28 @@ def _pair_context(source, target, prepared_source, prepared_target, settings, se
 
 def _register_pair(source, target, prepared_source, prepared_target, settings, seed, init=None):
     """Scan ``source`` onto scan ``target`` through :class:`RegistrationPipeline`:
-    matches, RANSAC and point-to-plane ICP, or ICP alone from ``init``. Returns the
-    transformation, its edge fitness (the share of source points within the settings'
-    ``edge_distance``; 0 for a result that did not converge) and Open3D's information
-    matrix at that distance (in the pair's centred frame)."""
+    screened from scratch (``init=None``: matches, RANSAC, ICP at the common resolution)
+    or refined by ICP from ``init``. Returns the transformation, its edge fitness (the
+    share of source points within the settings' ``edge_distance``; 0 for a result that
+    did not converge) and Open3D's information matrix at that distance (in the pair's
+    centred frame), both on the clouds the pair was registered at: the global clouds
+    when screening, the full scans when refining."""
     context = _pair_context(source, target, prepared_source, prepared_target, settings, seed)
-    steps = list(_PAIR_STEPS) if init is None else [_PAIR_STEPS[1]]
+    screen = init is None
     with warnings.catch_warnings():  # a pair that does not fit is simply no edge
         warnings.simplefilter("ignore", RegistrationWarning)
-        result = RegistrationPipeline(steps).run(context, init, assess_ambiguity=False)
+        pipeline = RegistrationPipeline(_pair_steps(settings, screen))
+        result = pipeline.run(context, init, assess_ambiguity=False)
     local = context.to_local(result.transformation)
     edge = settings.edge_distance
-    fitness = context.evaluate(local, edge).fitness if result.converged else 0.0
+    which = "global" if screen else "full"
+    fitness = context.evaluate(local, edge, which).fitness if result.converged else 0.0
+    if screen:
+        clouds = context.global_cloud("source"), context.global_cloud("target")
+    else:
+        clouds = context.source, context.target
     with repeatable_open3d():
-        information = reg.get_information_matrix_from_point_clouds(
-            context.source, context.target, edge, local
-        )
+        information = reg.get_information_matrix_from_point_clouds(*clouds, edge, local)
     return result.transformation, float(fitness), information
 
 
@@ -384,8 +397,9 @@ def register_multiway(
     n_global_points : int, default=2048
         The common resolution keeps about this many points of the largest scan.
     min_fitness : float, default=0.3
-        A pair becomes an edge when ICP leaves at least this share of the source scan
-        within the settings' ``edge_distance`` (1.5 resolutions) of the target.
+        A pair becomes an edge when its screening leaves at least this share of the
+        source scan (at the common resolution) within the settings' ``edge_distance``
+        (1.5 resolutions) of the target.
     n_jobs : int, default=None
         Parallel pair registrations (joblib; a Dask cluster under
         ``joblib.parallel_config(backend="dask")``).

@@ -102,3 +102,39 @@ def test_passes_that_keep_coverage_are_kept(object_target):
         source, object_target, global_method=None, refine="point_to_plane", init=truth
     )
     assert result.steps[0].info["passes_undone"] == []
+
+
+# ----------------------------------------------------------------------------- resolution
+@pytest.mark.parametrize("step_class", [PointToPointICP, PointToPlaneICP, GeneralizedICP])
+def test_full_resolution_false_keeps_every_pass_on_the_global_clouds(
+    object_target, step_class, monkeypatch
+):
+    dense = np.repeat(object_target, 3, axis=0) + np.random.default_rng(3).normal(
+        scale=1e-3, size=(3 * len(object_target), 3)
+    )  # dense enough to be downsampled for the global step
+    source, truth = moved_copy(dense, 6, permute=False)
+    solve = step_class._solve
+    seen = []
+
+    def spy(self, context, which, distance, init):
+        seen.append((which, len(self._clouds(context, which)[0].points)))
+        return solve(self, context, which, distance, init)
+
+    monkeypatch.setattr(step_class, "_solve", spy)
+    kept = register(source, dense, global_method=None, refine=step_class(), init=truth)
+    assert [w for w, _ in seen] == ["global", "full"]
+    assert seen[0][1] < seen[1][1] == len(source)
+    seen.clear()
+    coarse = register(
+        source,
+        dense,
+        global_method=None,
+        refine=step_class(full_resolution=False),
+        init=truth,
+        n_global_points=1024,
+    )
+    assert [w for w, _ in seen] == ["global", "global"] and seen[0][1] < len(source)
+    assert_close_pose(coarse.transformation, truth, 0.5, 0.02)
+    assert_close_pose(kept.transformation, truth, 0.05, 1e-3)
+    with pytest.raises(ValueError, match="'full_resolution' parameter"):
+        register(source, dense, global_method=None, refine=step_class(full_resolution="no"))

@@ -90,6 +90,11 @@ _DISTANCE_DOC = """max_correspondence_distance : float, sequence of float or Non
         global step's clouds, which have that resolution (when they are downsampled),
         the others on the full clouds."""
 
+_FULL_DOC = """full_resolution : bool, default=True
+        ``False`` runs every pass on the global step's clouds: several times faster on
+        large clouds, with the accuracy of their resolution (``register_multiway``
+        screens its candidate pairs so, before refining the kept ones in full)."""
+
 
 def _estimation(method: str, kernel, epsilon: float = 1e-3):
     """Open3D's estimation object for an ICP variant, with an optional robust kernel."""
@@ -117,6 +122,7 @@ class _ICPStep(RegistrationStep):
         "max_iteration": _ITERATIONS,
         "relative_fitness": _TOLERANCE,
         "relative_rmse": _TOLERANCE,
+        "full_resolution": ["boolean"],
     }
 
     def _check_params(self) -> None:
@@ -146,9 +152,11 @@ class _ICPStep(RegistrationStep):
         undone = []
         for k, distance in enumerate(distances):
             # Wide passes on the global clouds: at their resolution they see the same
-            # correspondences for far less work. The last pass is always on the full ones.
+            # correspondences for far less work. The last pass is on the full ones,
+            # unless full_resolution is False.
             coarse = context.downsampled and distance > context.voxel_size
-            which = "global" if coarse and k < len(distances) - 1 else "full"
+            last = k == len(distances) - 1
+            which = "global" if (coarse and not last) or not self.full_resolution else "full"
             result = self._solve(context, which, distance, current)
             moved = np.array(result.transformation)
             if k and distance < distances[k - 1]:
@@ -182,6 +190,7 @@ class PointToPointICP(_ICPStep):
         Per pass.
     relative_fitness, relative_rmse : float, default=1e-6
         Convergence thresholds.
+    {full}
     """
 
     name = "point_to_point"
@@ -193,11 +202,13 @@ class PointToPointICP(_ICPStep):
         max_iteration: int = 50,
         relative_fitness: float = 1e-6,
         relative_rmse: float = 1e-6,
+        full_resolution: bool = True,
     ) -> None:
         self.max_correspondence_distance = max_correspondence_distance
         self.max_iteration = max_iteration
         self.relative_fitness = relative_fitness
         self.relative_rmse = relative_rmse
+        self.full_resolution = full_resolution
 
     def _solve(self, context, which, distance, init):
         source, target = self._clouds(context, which)
@@ -221,6 +232,7 @@ class PointToPlaneICP(_ICPStep):
     kernel_scale : float, default=None
         The loss's scale; ``None`` is half the pass's correspondence distance.
     relative_fitness, relative_rmse : float, default=1e-6
+    {full}
     """
 
     name = "point_to_plane"
@@ -239,6 +251,7 @@ class PointToPlaneICP(_ICPStep):
         kernel_scale: float | None = None,
         relative_fitness: float = 1e-6,
         relative_rmse: float = 1e-6,
+        full_resolution: bool = True,
     ) -> None:
         self.max_correspondence_distance = max_correspondence_distance
         self.max_iteration = max_iteration
@@ -246,6 +259,7 @@ class PointToPlaneICP(_ICPStep):
         self.kernel_scale = kernel_scale
         self.relative_fitness = relative_fitness
         self.relative_rmse = relative_rmse
+        self.full_resolution = full_resolution
 
     def _solve(self, context, which, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
@@ -275,6 +289,7 @@ class GeneralizedICP(_ICPStep):
     kernel : {{None, "huber", "tukey", "cauchy", "gm", "l1"}}, default=None
     kernel_scale : float, default=None
     relative_fitness, relative_rmse : float, default=1e-6
+    {full}
     """
 
     name = "generalized"
@@ -293,6 +308,7 @@ class GeneralizedICP(_ICPStep):
         kernel_scale: float | None = None,
         relative_fitness: float = 1e-6,
         relative_rmse: float = 1e-6,
+        full_resolution: bool = True,
     ) -> None:
         self.max_correspondence_distance = max_correspondence_distance
         self.max_iteration = max_iteration
@@ -301,6 +317,7 @@ class GeneralizedICP(_ICPStep):
         self.kernel_scale = kernel_scale
         self.relative_fitness = relative_fitness
         self.relative_rmse = relative_rmse
+        self.full_resolution = full_resolution
 
     def _solve(self, context, which, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
@@ -311,7 +328,7 @@ class GeneralizedICP(_ICPStep):
 
 for _cls in (PointToPointICP, PointToPlaneICP, GeneralizedICP):
     if _cls.__doc__:  # None under python -OO
-        _cls.__doc__ = _cls.__doc__.format(distance=_DISTANCE_DOC)
+        _cls.__doc__ = _cls.__doc__.format(distance=_DISTANCE_DOC, full=_FULL_DOC)
 
 
 class MultiScaleICP(RegistrationStep):
