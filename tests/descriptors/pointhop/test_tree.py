@@ -96,3 +96,26 @@ def test_threads_give_the_same_descriptors(fitted, monkeypatch):
     monkeypatch.setattr(octants, "_BLOCKS_PER_THREAD", 1)  # threads even on a small cloud
     np.testing.assert_array_equal(fitted.set_params(n_jobs=2).transform(cloud), one)
     fitted.set_params(n_jobs=None)
+
+
+# ----------------------------------------------------------------------------- memory
+def test_describing_holds_little_beyond_the_output(monkeypatch):
+    """Peak traced memory of one transform per point, with small neighbourhood chunks so
+    that the per-point structure dominates: about 2.2 kB (0.5 kB of it the 128-axis
+    output). Holding every hop's raw neighbours, or a transposed copy of a hop's
+    output, puts it above 3.3 kB."""
+    import tracemalloc
+
+    from o3d_rpointhop.datasets import make_object
+
+    monkeypatch.setattr(hops, "GEOMETRY_CHUNK", 1024)
+    points = make_object(20000, shape_seed=3, sample_seed=1)
+    model = RPointHopTransformer.pretrained(n_components=128)
+    tracemalloc.start()
+    try:
+        out = model.transform(points)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert out.shape == (20000, 128)
+    assert peak / len(points) < 2600
