@@ -253,8 +253,8 @@ class HopTree:
             if projection is not None:
                 # A BLAS product rounds a row by where it sits in the kernel's tiles. In
                 # float64 that is far below float32's resolution, so once rounded to
-                # float32 the rows come out the same wherever they sit: permuting the
-                # cloud permutes the result (measured: no difference in 320k values).
+                # float32 the rows almost always come out the same wherever they sit
+                # (no difference in 320k values; docs/algorithm.md gives the exception).
                 mean, axes = projection
                 out[target] = (block.T - mean) @ axes
             else:
