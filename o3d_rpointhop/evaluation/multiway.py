@@ -21,7 +21,12 @@ from scipy.spatial.transform import Rotation
 
 from ..descriptors import FPFHTransformer
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
-from ..registration.multiway import MultiwayResult, common_voxel, register_multiway
+from ..registration.multiway import (
+    MultiwayResult,
+    common_voxel,
+    optimise_pose_graph,
+    register_multiway,
+)
 from ..transforms import apply_transform, rotation_error_deg
 from .methods import feature_ransac, fpfh_recipe_cloud
 
@@ -90,13 +95,7 @@ def open3d_multiway_recipe(clouds: list[np.ndarray], voxel: float, seed: int = 0
     option = reg.GlobalOptimizationOption(
         max_correspondence_distance=fine, edge_prune_threshold=0.25, reference_node=0
     )
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        reg.global_optimization(
-            graph,
-            reg.GlobalOptimizationLevenbergMarquardt(),
-            reg.GlobalOptimizationConvergenceCriteria(),
-            option,
-        )
+    optimise_pose_graph(graph, option)  # the tutorial's options, its optimiser
     return MultiwayResult(
         poses=[np.array(node.pose) for node in graph.nodes],
         pose_graph=graph,

@@ -39,7 +39,7 @@ from .quality import RegistrationWarning
 from .settings import RegistrationSettings
 from .steps import PointToPlaneICP, RANSACGlobal
 
-__all__ = ["MultiwayResult", "common_voxel", "register_multiway"]
+__all__ = ["MultiwayResult", "common_voxel", "optimise_pose_graph", "register_multiway"]
 
 reg = o3d.pipelines.registration
 
@@ -315,6 +315,19 @@ def _poses_from_tree(tree, edges, n: int) -> list:
     return poses
 
 
+def optimise_pose_graph(graph, option) -> None:
+    """Open3D's Levenberg-Marquardt global optimisation of ``graph`` in place, with
+    ``option`` (a ``GlobalOptimizationOption``) and Open3D's default convergence
+    criteria, its progress messages silenced."""
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        reg.global_optimization(
+            graph,
+            reg.GlobalOptimizationLevenbergMarquardt(),
+            reg.GlobalOptimizationConvergenceCriteria(),
+            option,
+        )
+
+
 def _optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettings):
     """Open3D's global optimisation over the connected scans; returns the graph, the
     optimised poses (None for unconnected scans) and the edges it kept."""
@@ -335,19 +348,15 @@ def _optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettin
             )
         )
         listed.append((i, j))
-    option = reg.GlobalOptimizationOption(
-        max_correspondence_distance=settings.edge_distance,
-        edge_prune_threshold=0.25,
-        preference_loop_closure=1.0,
-        reference_node=0,
+    optimise_pose_graph(
+        graph,
+        reg.GlobalOptimizationOption(
+            max_correspondence_distance=settings.edge_distance,
+            edge_prune_threshold=0.25,
+            preference_loop_closure=1.0,
+            reference_node=0,
+        ),
     )
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        reg.global_optimization(
-            graph,
-            reg.GlobalOptimizationLevenbergMarquardt(),
-            reg.GlobalOptimizationConvergenceCriteria(),
-            option,
-        )
     optimised: list = [None] * len(poses)
     # Relative to scan 0's optimised pose, so that scan 0 is exactly the identity.
     reference = np.linalg.inv(np.array(graph.nodes[index[0]].pose))

@@ -11,6 +11,7 @@ from sklearn.utils._param_validation import HasMethods, Interval
 from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
 from ..defaults import default_descriptor
+from ..result import StepResult
 from ._base import RegistrationStep
 
 __all__ = ["GlobalStep", "DESCRIPTOR", "COUNT"]
@@ -47,3 +48,24 @@ class GlobalStep(RegistrationStep):
                 "filters; at least 3 are needed (relax mutual_filter / max_ratio / top_k)"
             )
         return corr
+
+    @staticmethod
+    def _measured(
+        context: RegistrationContext,
+        name: str,
+        transformation: np.ndarray,
+        distance: float,
+        corr: Correspondences,
+        **info,
+    ) -> StepResult:
+        """The step's estimate measured like every global step's: fitness and inliers on
+        the global clouds within ``distance``, reported with its match count, the step's
+        own ``info`` and the distance."""
+        check = context.evaluate(transformation, distance, which="global")
+        check.name = name
+        check.info = {
+            "candidate_matches": len(corr),
+            **info,
+            "max_correspondence_distance": distance,
+        }
+        return check

@@ -146,12 +146,12 @@ class ConsensusGlobal(GlobalStep):
             set_size=int(self.set_size),
             n_threads=max(1, effective_n_jobs(self.n_jobs)),
         )
-        check = context.evaluate(found.transformation, distance, which="global")
-        check.name = "consensus"
-        check.info = {
-            "candidate_matches": len(corr),
-            "inlier_matches": int(found.inliers.sum()),
-            "hypotheses": found.n_hypotheses,
-            "max_correspondence_distance": distance,
-        }
-        return check
+        return self._measured(
+            context,
+            "consensus",
+            found.transformation,
+            distance,
+            corr,
+            inlier_matches=int(found.inliers.sum()),
+            hypotheses=found.n_hypotheses,
+        )

@@ -92,14 +92,14 @@ class FGRGlobal(GlobalStep):
                 option,
             )
         # FGR reports no inliers of its own: measure them like every other step.
-        check = context.evaluate(np.array(result.transformation), distance, which="global")
-        check.name = "fgr"
-        check.info = {
-            "candidate_matches": len(corr),
-            "after_tuple_test": len(pairs),
-            "max_correspondence_distance": distance,
-        }
-        return check
+        return self._measured(
+            context,
+            "fgr",
+            np.array(result.transformation),
+            distance,
+            corr,
+            after_tuple_test=len(pairs),
+        )
 
 
 def tuple_test(

@@ -109,12 +109,12 @@ class RANSACGlobal(GlobalStep):
             ransac_n=int(self.ransac_n),
             clouds=(src, tgt) if self.selection == "fitness" else None,
         )
-        check = context.evaluate(found.transformation, distance, which="global")
-        check.name = "ransac"
-        check.info = {
-            "candidate_matches": len(corr),
-            "inlier_matches": int(found.inliers.sum()),
-            "iterations": found.iterations,
-            "max_correspondence_distance": distance,
-        }
-        return check
+        return self._measured(
+            context,
+            "ransac",
+            found.transformation,
+            distance,
+            corr,
+            inlier_matches=int(found.inliers.sum()),
+            iterations=found.iterations,
+        )
