@@ -13,13 +13,14 @@ against 245 ms at 4400 points, 66 against 61 ms at 1024), the price of honouring
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, contextmanager
 
 import open3d as o3d
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["one_blas_thread", "repeatable_open3d"]
+__all__ = ["even_chunks", "map_threads", "one_blas_thread", "repeatable_open3d"]
 
 _CONTROLLER: list[ThreadpoolController] = []
 
@@ -50,3 +51,31 @@ def repeatable_open3d() -> Iterator[None]:
         yield
     finally:
         o3d.utility.set_max_threads(previous)
+
+
+def map_threads(func: Callable, items: Sequence, n_threads: int) -> None:
+    """``func(*item)`` for every item, on ``n_threads`` threads started for this call only
+    (in the calling thread when ``n_threads <= 1``). Each call writes its own part of
+    some output, so the order in which calls finish does not matter; the first
+    exception raised by a call is raised here. The work is numpy, scipy and Open3D
+    calls that release the GIL."""
+    if n_threads <= 1 or len(items) <= 1:
+        for item in items:
+            func(*item)
+        return
+    workers = min(n_threads, len(items))
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rpointhop") as pool:
+        for future in [pool.submit(func, *item) for item in items]:
+            future.result()
+
+
+def even_chunks(n: int, largest: int, n_threads: int, smallest: int = 1) -> list[tuple[int, int]]:
+    """``(start, stop)`` bounds of ``range(n)`` in equal chunks for ``n_threads``
+    threads: ``n_threads`` times as many chunks as chunks of at most ``largest`` need
+    (so the threads finish together and the chunks in flight at once hold about
+    ``largest`` items in all), but none under ``smallest`` items unless ``n`` is."""
+    n_threads = max(1, n_threads)
+    count = n_threads * max(1, -(-n // largest))
+    count = max(1, min(count, n // max(1, smallest)))
+    size = max(1, -(-n // count))
+    return [(start, min(n, start + size)) for start in range(0, n, size)]

@@ -46,6 +46,13 @@ def add_parser(commands) -> None:
         help="3DMatch: turn every source fragment by a random rotation (uniform over SO(3), "
         "seeded) before registering",
     )
+    p.add_argument(
+        "--n-jobs",
+        type=int,
+        default=-1,
+        help="multiway: parallel pair registrations (default -1: all cores, as Open3D's "
+        "recipe uses; the poses do not depend on it)",
+    )
     add_model(p, default="register()'s default, the ModelNet40 model on 128 axes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
@@ -98,7 +105,7 @@ def _multiway(args: argparse.Namespace) -> int:
     unknown = [o for o in objects if o not in OBJECTS]
     if unknown:
         raise CommandError(f"multiway objects are {list(OBJECTS)}, got {unknown}")
-    run = run_multiway(objects, data=args.data, seed=args.seed)
+    run = run_multiway(objects, data=args.data, seed=args.seed, n_jobs=args.n_jobs)
     folder = Path(args.output)
     folder.mkdir(parents=True, exist_ok=True)
     written = []

@@ -125,9 +125,17 @@ class MultiwayRun:
     moved: dict = field(default_factory=dict)
 
 
-def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, seed=0):
-    """Every object with every descriptor; returns a :class:`MultiwayRun`."""
-    out = {"dataset": "multiway", "settings": {"seed": seed, "tolerance": TOLERANCE}, "objects": {}}
+def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, seed=0, n_jobs=-1):
+    """Every object with every descriptor; returns a :class:`MultiwayRun`.
+
+    ``n_jobs`` is :func:`register_multiway`'s (parallel pairs; default all cores, as
+    Open3D's recipe runs its RANSAC and ICP on all cores); the poses do not depend on it.
+    """
+    out = {
+        "dataset": "multiway",
+        "settings": {"seed": seed, "tolerance": TOLERANCE, "n_jobs": n_jobs},
+        "objects": {},
+    }
     moved_scans = {}
     for name in objects:
         scans = _scans(name, data)
@@ -156,7 +164,7 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
                     if method == "fpfh"
                     else None
                 )
-                result = register_multiway(moved, descriptor, seed=seed)
+                result = register_multiway(moved, descriptor, seed=seed, n_jobs=n_jobs)
             rows = []
             for k, n in enumerate(names):
                 pose = result.poses[k]

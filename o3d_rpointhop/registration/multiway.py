@@ -410,8 +410,9 @@ def register_multiway(
         source scan (at the common resolution) within the settings' ``edge_distance``
         (1.5 resolutions) of the target.
     n_jobs : int, default=None
-        Parallel pair registrations (joblib; a Dask cluster under
-        ``joblib.parallel_config(backend="dask")``).
+        Parallel pair registrations, both the screening of candidate pairs and the
+        final refinement of kept edges (joblib; a Dask cluster under
+        ``joblib.parallel_config(backend="dask")``). The result does not depend on it.
     progress : bool, default=None
         A bar on stderr over the pairs (``None``: when stderr is a terminal).
     seed : int, default=0
@@ -464,14 +465,29 @@ def register_multiway(
     graph, poses, kept = _optimise(edges, tree, poses, settings)
     # Final refinement: every kept edge again by ICP from the optimised poses (each
     # keeps the fitness that made it an edge).
-    refined = {}
-    for i, j in kept:
-        clouds = (prepared[j][0], None), (prepared[i][0], None)
-        init = np.linalg.inv(poses[i]) @ poses[j]
-        transformation, _, information = _register_pair(
-            points[j], points[i], *clouds, settings, seed, init
-        )
-        refined[(i, j)] = (transformation, edges[(i, j)][1], information)
+    results = parallel_map(
+        _register_pair,
+        [
+            (
+                points[j],
+                points[i],
+                (prepared[j][0], None),
+                (prepared[i][0], None),
+                settings,
+                seed,
+                np.linalg.inv(poses[i]) @ poses[j],
+            )
+            for i, j in kept
+        ],
+        n_jobs=n_jobs,
+        progress=progress,
+        desc="refine",
+        unit="edge",
+    )
+    refined = {
+        (i, j): (transformation, edges[(i, j)][1], information)
+        for (i, j), (transformation, _, information) in zip(kept, results, strict=True)
+    }
     if refined:
         tree = [e for e in tree if e in refined]
         graph, poses, kept = _optimise(refined, tree, poses, settings)

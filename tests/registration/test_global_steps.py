@@ -112,3 +112,34 @@ def test_documented_open3d_recipes_run_silently_and_register(capfd):
     assert np.linalg.norm(first[:3, 3] - truth[:3, 3]) < 0.02
     assert rotation_error_deg(second, truth) < 20.0
     assert np.linalg.norm(second[:3, 3] - truth[:3, 3]) < 0.15
+
+
+@pytest.mark.parametrize("ransac_n, edge_length", [(3, 0.9), (4, 0.7), (3, 0.0)])
+def test_compiled_draw_check_keeps_exactly_what_the_numpy_check_keeps(ransac_n, edge_length):
+    """The RANSAC samples kept by the compiled check (distinct matches, Open3D's
+    edge-length checker) are the ones the numpy expression keeps, near-ties included:
+    one differently rounded length would change the seeded result."""
+    from scipy.spatial.transform import Rotation
+
+    from o3d_rpointhop.registration.steps._ransac import _checked_draws
+
+    rng = np.random.default_rng(ransac_n)
+    source = rng.normal(size=(300, 3)) * [1.0, 5.0, 0.01]
+    target = source @ Rotation.random(random_state=3).as_matrix().T
+    target[::3] += rng.normal(scale=0.3, size=(100, 3))  # a third of the matches wrong
+    if edge_length:
+        # A third scaled by exactly the checker's ratio: their edges sit on its boundary,
+        # where the last bit of a length decides.
+        target[1::3] = source[1::3] / edge_length
+    samples = rng.integers(0, 300, size=(200_000, ransac_n))
+    kept = _checked_draws(samples, source, target, edge_length)
+
+    expected = (np.diff(np.sort(samples, axis=1), axis=1) != 0).all(axis=1)
+    src, tgt = source[samples], target[samples]
+    if edge_length:
+        for a, b in zip(*np.triu_indices(ransac_n, 1), strict=True):
+            ls = np.linalg.norm(src[:, a] - src[:, b], axis=1)
+            lt = np.linalg.norm(tgt[:, a] - tgt[:, b], axis=1)
+            expected &= (ls > edge_length * lt) & (lt > edge_length * ls)
+    assert 0 < expected.sum() < len(samples)
+    np.testing.assert_array_equal(kept, expected)

@@ -24,6 +24,16 @@ def test_poses_of_a_synthetic_multiscan_object_are_recovered():
     assert set(result.pairs) == {(i, j) for i in range(4) for j in range(i + 1, 4)}
 
 
+def test_parallel_pairs_give_the_same_poses():
+    """Screening and refinement spread over processes: the same bytes as in one."""
+    scans, _ = partial_views(3, seed=3)
+    one = register_multiway(scans, seed=0)
+    two = register_multiway(scans, seed=0, n_jobs=2)
+    assert one.edges == two.edges
+    for a, b in zip(one.poses, two.poses, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_a_scan_of_something_else_is_reported_unconnected():
     scans, truth = partial_views(3, seed=1)
     stranger = make_object(1700, shape_seed=77) * 0.8 + 0.3  # another object entirely

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..._utils.threads import even_chunks, map_threads
 from ._attributes import ATTRIBUTE_CHANNELS, eigen_features
 from ._config import HopConfig
 from ._frames import local_reference_frames, project
@@ -39,6 +40,9 @@ __all__ = ["CloudGeometry", "build_geometry", "cloud_scale"]
 
 #: Points whose neighbourhoods (about 3 kB each in float64) are in memory at once.
 GEOMETRY_CHUNK = 16384
+#: Fewest points per chunk when chunks are shared between threads (below about 8k
+#: points, threads cost as much as they save: measured at 2k-8k points, two threads).
+THREAD_CHUNK = 4096
 
 
 @dataclass
@@ -90,21 +94,30 @@ def cloud_scale(mean_dist: np.ndarray, scale: str | float) -> float:
     return value
 
 
+def _chunks(n: int, n_threads: int) -> list[tuple[int, int]]:
+    """Bounds of the chunks of ``n`` queries worked on at once: at most
+    :data:`GEOMETRY_CHUNK` in flight in all, shared by ``n_threads`` threads when each
+    gets at least :data:`THREAD_CHUNK`."""
+    return even_chunks(n, GEOMETRY_CHUNK, n_threads, THREAD_CHUNK)
+
+
 def _rows_in(sorted_ids: np.ndarray, start: int, stop: int) -> tuple[int, int]:
     """Positions ``lo:hi`` of the ids in ``[start, stop)`` in a sorted id array."""
     lo, hi = np.searchsorted(sorted_ids, (start, stop))
     return int(lo), int(hi)
 
 
-def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> CloudGeometry:
+def build_geometry(
+    points: np.ndarray, config: HopConfig, for_fit: bool, n_threads: int = 1
+) -> CloudGeometry:
     """Compute the hop structure of one validated cloud, large enough for ``config``
     (``config.shortfall(len(points))`` is None: the estimator checks it).
 
-    Neighbourhoods are searched and expressed in their frames
-    :data:`GEOMETRY_CHUNK` queries at a time; a hop's octants and neighbour rows (5
-    bytes per neighbour) are kept only until its pooling operator (4 bytes per
-    neighbour) is built, and hop 1's only when the scene attributes need them, so
-    memory grows linearly with the cloud.
+    Neighbourhoods are searched and expressed in their frames in chunks, at most
+    :data:`GEOMETRY_CHUNK` queries in flight at once over all threads; a hop's octants
+    and neighbour rows (5 bytes per neighbour) are kept only until its pooling operator
+    (4 bytes per neighbour) is built, and hop 1's only when the scene attributes need
+    them, so memory grows linearly with the cloud.
 
     Parameters
     ----------
@@ -113,6 +126,10 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
     for_fit : bool
         If True the last hop's queries are its sample (as in training); otherwise they
         are all ``n`` points (one descriptor per input point).
+    n_threads : int, default=1
+        Threads sharing the chunks (started for this call only). Every query's
+        neighbourhood is worked on by itself, so the result does not depend on the
+        chunks or the threads.
     """
     n = len(points)
     if not np.any(points != points[0]):
@@ -142,8 +159,8 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
     planes = np.ascontiguousarray(points.T)  # (3, n)
     centroid = points.mean(axis=0)[:, None]
     index = NeighborIndex(points)
-    for start in range(0, n, GEOMETRY_CHUNK):
-        stop = min(n, start + GEOMETRY_CHUNK)
+
+    def full_chunk(start: int, stop: int, index: NeighborIndex = index) -> None:
         nn_idx, nn_sq = index.query(points[start:stop], k_all)  # column 0: the point itself
         offsets = np.take(planes, nn_idx, axis=1) - planes[:, start:stop, None]
         # Every hop expresses its neighbours in these frames. (The paper re-decides the
@@ -170,8 +187,9 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
                 neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
             if h == 0:
                 hop1_sums[lo:hi] = octant_means(block, octant)
-        del nn_idx, nn_sq, offsets, local, block, octant
-    del index
+
+    map_threads(full_chunk, _chunks(n, n_threads), n_threads)
+    del index, full_chunk  # the whole cloud's k-d tree
     poolings: list[OctantPooling | None] = [None] * (n_hops - 1)
     for h in range(1, n_hops):
         k, src, qry = config.n_neighbors[h], sources[h], queries[h]
@@ -179,21 +197,23 @@ def build_geometry(points: np.ndarray, config: HopConfig, for_fit: bool) -> Clou
             octants[h] = np.empty((len(qry), k), np.uint8)
             neighbours[h] = np.empty(octants[h].shape, np.int32)
             src_index = NeighborIndex(points[src])
-            for lo in range(0, len(qry), GEOMETRY_CHUNK):
-                hi = min(len(qry), lo + GEOMETRY_CHUNK)
+
+            def sampled_chunk(lo, hi, h=h, k=k, src=src, qry=qry, src_index=src_index):
                 idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
                 nb = drop_self(idx, sq, k)
                 offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
                 octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
                 neighbours[h][lo:hi] = nb
-            del src_index
+
+            map_threads(sampled_chunk, _chunks(len(qry), n_threads), n_threads)
+            del src_index, sampled_chunk
         poolings[h - 1] = OctantPooling(octants[h], neighbours[h], len(src))
         octants[h] = neighbours[h] = None
     hop1_sums /= cloud_scale(mean_dist, config.scale)
     hop1 = hop1_sums
     if len(config.attributes) > 1:
         extra = _neighbour_attributes(
-            config.attributes, queries[0], neighbours[0], octants[0], frames, eigenvalues
+            config.attributes, queries[0], neighbours[0], octants[0], frames, eigenvalues, n_threads
         )
         hop1 = np.hstack([hop1, extra])
     return CloudGeometry(n_points=n, hop1_attributes=hop1, poolings=poolings)
@@ -206,18 +226,19 @@ def _neighbour_attributes(
     octants: np.ndarray,
     frames: np.ndarray,
     eigenvalues: np.ndarray | None,
+    n_threads: int = 1,
 ) -> np.ndarray:
     """Octant means of the hop-1 neighbours' normals (in each query's frame) and
     eigenvalue features, after ``"xyz"``, in the order of ``attributes``.
 
-    A second pass over the hop-1 queries, :data:`GEOMETRY_CHUNK` at a time: every
+    A second pass over the hop-1 queries, in the same chunks as the first: every
     neighbour's own frame and eigenvalues are known only once the first pass is done.
     """
     features = eigen_features(eigenvalues) if eigenvalues is not None else None
     width = sum(ATTRIBUTE_CHANNELS[a] for a in attributes[1:]) * N_OCTANTS
     out = np.empty((len(queries), width))
-    for lo in range(0, len(queries), GEOMETRY_CHUNK):
-        hi = min(len(queries), lo + GEOMETRY_CHUNK)
+
+    def chunk(lo: int, hi: int) -> None:
         nb, octant = neighbours[lo:hi], octants[lo:hi]
         blocks = []
         for name in attributes[1:]:
@@ -228,4 +249,6 @@ def _neighbour_attributes(
                 values = np.moveaxis(features[nb], 2, 0)  # (7, q, k)
             blocks.append(octant_means(values, octant))
         out[lo:hi] = np.hstack(blocks)
+
+    map_threads(chunk, _chunks(len(queries), n_threads), n_threads)
     return out

@@ -6,10 +6,10 @@ nothing is ever NaN and adding a constant to every value adds it to every octant
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 import scipy.sparse as sp
+
+from ..._utils.threads import map_threads
 
 __all__ = [
     "N_OCTANTS",
@@ -193,19 +193,12 @@ class OctantPooling:
             for start in range(0, self.n_queries, QUERY_BLOCK)
         ]
 
-        def run(bound):
-            consume(bound[0], bound[1], self._pool_block(bound[0], bound[1], features))
+        def run(start, stop):
+            consume(start, stop, self._pool_block(start, stop, features))
 
         # A thread pays off only with a few blocks to share (measured on 1k-2k point
         # clouds, two threads: 10-20 % faster from 8 blocks per thread on).
-        n_threads = min(n_threads, 1 + len(bounds) // _BLOCKS_PER_THREAD)
-        if n_threads <= 1:
-            for bound in bounds:
-                run(bound)
-            return
-        with ThreadPoolExecutor(max_workers=n_threads, thread_name_prefix="rpointhop") as pool:
-            for future in [pool.submit(run, bound) for bound in bounds]:
-                future.result()
+        map_threads(run, bounds, min(n_threads, 1 + len(bounds) // _BLOCKS_PER_THREAD))
 
     def __call__(self, features: np.ndarray, n_threads: int = 1) -> np.ndarray:
         """Pool features ``(n_sources, n_channels)`` into ``(n_channels, 8, q)``."""

@@ -296,7 +296,7 @@ class HopTree:
             large=len(points) >= 100_000,
         )
         order = spatial_order(points)
-        geometry = build_geometry(points[order], config, for_fit=False)
+        geometry = build_geometry(points[order], config, for_fit=False, n_threads=n_threads)
         last = len(self.kernels) - 1
         out = np.empty((geometry.n_points, n_out), dtype=np.float32)
         if last == 0:

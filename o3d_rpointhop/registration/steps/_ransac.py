@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..._utils.compiled import kernel
 from ...transforms import rigid_transform, rigid_transforms
 
 __all__ = ["RansacResult", "ransac"]
@@ -50,6 +51,42 @@ class RansacResult:
     transformation: np.ndarray
     inliers: np.ndarray
     iterations: int
+
+
+@kernel()
+def _checked_draws(samples, source, target, edge_length):  # pragma: no cover - compiled
+    """Which drawn samples (rows of match indices) hold distinct matches whose edges
+    agree in length between source and target (Open3D's edge-length checker: each
+    length above ``edge_length`` times its partner; skipped when it is 0).
+
+    One pass per sample, without the gathered ``(b, n, 3)`` copies a numpy check needs.
+    Lengths are computed as ``numpy.linalg.norm`` rounds them, ``sqrt((x^2 + y^2) +
+    z^2)``, so the samples kept are exactly the ones the numpy expression keeps.
+    """
+    n, r = samples.shape
+    ok = np.ones(n, dtype=np.bool_)
+    for i in range(n):
+        good = True
+        for a in range(r):
+            for b in range(a + 1, r):
+                if samples[i, a] == samples[i, b]:
+                    good = False
+        if good and edge_length > 0.0:
+            for a in range(r):
+                for b in range(a + 1, r):
+                    p, q = samples[i, a], samples[i, b]
+                    dx = source[p, 0] - source[q, 0]
+                    dy = source[p, 1] - source[q, 1]
+                    dz = source[p, 2] - source[q, 2]
+                    ls = np.sqrt((dx * dx + dy * dy) + dz * dz)
+                    dx = target[p, 0] - target[q, 0]
+                    dy = target[p, 1] - target[q, 1]
+                    dz = target[p, 2] - target[q, 2]
+                    lt = np.sqrt((dx * dx + dy * dy) + dz * dz)
+                    if not (ls > edge_length * lt and lt > edge_length * ls):
+                        good = False
+        ok[i] = good
+    return ok
 
 
 def _residuals(rot, shift, src, tgt) -> np.ndarray:
@@ -200,15 +237,8 @@ def ransac(
         drawn += size
         batch = min(2 * batch, _MAX_BATCH)
         samples = rng.integers(0, m, size=(size, ransac_n))
-        samples = samples[(np.diff(np.sort(samples, axis=1), axis=1) != 0).all(axis=1)]
+        samples = samples[_checked_draws(samples, source, target, float(edge_length))]
         src, tgt = source[samples], target[samples]  # (b, ransac_n, 3)
-        if edge_length:
-            ok = np.ones(len(samples), dtype=bool)
-            for a, b in zip(*np.triu_indices(ransac_n, 1), strict=True):
-                ls = np.linalg.norm(src[:, a] - src[:, b], axis=1)
-                lt = np.linalg.norm(tgt[:, a] - tgt[:, b], axis=1)
-                ok &= (ls > edge_length * lt) & (lt > edge_length * ls)
-            src, tgt = src[ok], tgt[ok]
         if not len(src):
             continue
         rot, shift = rigid_transforms(src, tgt)

@@ -90,12 +90,45 @@ def test_descriptors_do_not_depend_on_the_internal_order(fitted, monkeypatch):
     np.testing.assert_array_equal(fitted.transform(cloud), spatial)
 
 
-def test_threads_give_the_same_descriptors(fitted, monkeypatch):
+@pytest.mark.parametrize("model", ["fitted", "scene"])
+def test_threads_give_the_same_descriptors(model, fitted, monkeypatch):
+    """Pooling blocks and geometry chunks shared between threads: the same bytes as on
+    one thread (the scene model also threads its normal and eigenvalue attributes)."""
+    model = fitted if model == "fitted" else RPointHopTransformer.pretrained("scene")
     cloud = make_blob(900, shape_seed=12)
-    one = fitted.transform(cloud)
-    monkeypatch.setattr(octants, "_BLOCKS_PER_THREAD", 1)  # threads even on a small cloud
-    np.testing.assert_array_equal(fitted.set_params(n_jobs=2).transform(cloud), one)
-    fitted.set_params(n_jobs=None)
+    one = model.transform(cloud)
+    # Threads even on a small cloud, in uneven chunks.
+    monkeypatch.setattr(octants, "_BLOCKS_PER_THREAD", 1)
+    monkeypatch.setattr(hops, "THREAD_CHUNK", 50)
+    monkeypatch.setattr(hops, "GEOMETRY_CHUNK", 333)
+    calls = []
+    original = hops.map_threads
+
+    def spy(func, items, n_threads):
+        calls.append((len(items), n_threads))
+        return original(func, items, n_threads)
+
+    monkeypatch.setattr(hops, "map_threads", spy)
+    threaded = model.set_params(n_jobs=2).transform(cloud)
+    model.set_params(n_jobs=None)
+    assert calls and all(n == 2 and items >= 2 for items, n in calls)
+    np.testing.assert_array_equal(threaded, one)
+
+
+def test_even_chunks_cover_the_range_in_balanced_pieces():
+    from o3d_rpointhop._utils.threads import even_chunks
+
+    for n, largest, threads, smallest in [(10, 4, 2, 1), (1000, 300, 3, 1), (5, 100, 4, 2)]:
+        bounds = even_chunks(n, largest, threads, smallest)
+        assert bounds[0][0] == 0 and bounds[-1][1] == n
+        assert all(a[1] == b[0] for a, b in zip(bounds, bounds[1:], strict=False))
+        sizes = [hi - lo for lo, hi in bounds]
+        # Each thread's share of at most `largest` items, unless that is under `smallest`.
+        assert max(sizes) <= max(smallest, -(-largest // threads))
+        assert len(bounds) >= min(threads, n // smallest)
+    assert even_chunks(8000, 16384, 2, 4096) == [(0, 8000)]  # too small to share
+    assert len(even_chunks(20000, 16384, 2, 4096)) == 4
+    assert even_chunks(0, 10, 2) == []
 
 
 # ----------------------------------------------------------------------------- memory
