@@ -89,7 +89,11 @@ def nearest_descriptors(
     distances = np.empty((len(fast_q), k), dtype=np.float64)
     for start in range(0, len(fast_q), rows):
         stop = min(len(fast_q), start + rows)
-        approx = ref_sq[None, :] - 2.0 * (fast_q[start:stop] @ fast_r.T)  # + |q|^2
+        # |r|^2 - 2 q.r (+ |q|^2), in place: the same bits as the expression, without
+        # its two temporaries of the block's size.
+        approx = fast_q[start:stop] @ fast_r.T
+        approx *= -2.0
+        approx += ref_sq
         if n_candidates < approx.shape[1]:
             cand = _smallest(approx, n_candidates)
         else:
