@@ -4,9 +4,10 @@ scored in batches.
 Open3D's ``registration_ransac_based_on_correspondence`` costs about 85 us per iteration
 on one thread (it transforms and scores the whole source cloud for every hypothesis
 that passes its checkers), and it is only repeatable on one thread. Here a batch of
-hypotheses costs a few array operations: triples are drawn with a seeded numpy
-generator, filtered by Open3D's two checkers (edge-length similarity, then the
-distance of the triple's own points after the fit), fitted by a batched Kabsch solve,
+hypotheses costs a few array operations and two compiled passes: triples are drawn
+with a seeded numpy generator, filtered by Open3D's two checkers (edge-length
+similarity, in one compiled pass with the distinctness check; then the distance of
+the triple's own points after the fit), fitted by a batched Kabsch solve,
 and ranked by the number of correspondences they carry within the distance threshold
 (which also sets when to stop). The best-ranked ones are then verified as Open3D
 scores every hypothesis: by fitness (share of all source points with a target point
