@@ -115,6 +115,26 @@ def test_threads_give_the_same_descriptors(model, fitted, monkeypatch):
     np.testing.assert_array_equal(threaded, one)
 
 
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_map_threads_runs_every_item_and_raises_a_failure(n_threads):
+    from o3d_rpointhop._utils.threads import map_threads
+
+    out = np.zeros(10)
+
+    def fill(lo, hi):
+        out[lo:hi] = np.arange(lo, hi)
+
+    map_threads(fill, [(0, 3), (3, 7), (7, 10)], n_threads)
+    np.testing.assert_array_equal(out, np.arange(10))
+
+    def fail(lo, hi):
+        if lo == 3:
+            raise ValueError("chunk 3:7 failed")
+
+    with pytest.raises(ValueError, match="chunk 3:7"):
+        map_threads(fail, [(0, 3), (3, 7), (7, 10)], n_threads)
+
+
 def test_even_chunks_cover_the_range_in_balanced_pieces():
     from o3d_rpointhop._utils.threads import even_chunks
 
