@@ -56,9 +56,10 @@ def repeatable_open3d() -> Iterator[None]:
 def map_threads(func: Callable, items: Sequence, n_threads: int) -> None:
     """``func(*item)`` for every item, on ``n_threads`` threads started for this call only
     (in the calling thread when ``n_threads <= 1``). Each call writes its own part of
-    some output, so the order in which calls finish does not matter; the first
-    exception raised by a call is raised here. The work is numpy, scipy and Open3D
-    calls that release the GIL."""
+    some output, so the order in which calls finish does not matter; an exception
+    raised by a call is raised here (the first failing item's, in item order), after
+    the other calls have ended. The work is numpy, scipy and Open3D calls that release
+    the GIL."""
     if n_threads <= 1 or len(items) <= 1:
         for item in items:
             func(*item)
