@@ -117,8 +117,9 @@ def test_documented_open3d_recipes_run_silently_and_register(capfd):
 @pytest.mark.parametrize("ransac_n, edge_length", [(3, 0.9), (4, 0.7), (3, 0.0)])
 def test_compiled_draw_check_keeps_exactly_what_the_numpy_check_keeps(ransac_n, edge_length):
     """The RANSAC samples kept by the compiled check (distinct matches, Open3D's
-    edge-length checker) are the ones the numpy expression keeps, near-ties included:
-    one differently rounded length would change the seeded result."""
+    edge-length checker) are the ones a numpy check with lengths rounded as
+    ``sqrt((x^2 + y^2) + z^2)`` keeps (numpy 2's ``linalg.norm`` order), near-ties
+    included: one differently rounded length would change the seeded result."""
     from scipy.spatial.transform import Rotation
 
     from o3d_rpointhop.registration.steps._ransac import _checked_draws
@@ -136,11 +137,22 @@ def test_compiled_draw_check_keeps_exactly_what_the_numpy_check_keeps(ransac_n, 
 
     expected = (np.diff(np.sort(samples, axis=1), axis=1) != 0).all(axis=1)
     src, tgt = source[samples], target[samples]
+
+    def length(d, order=(0, 1, 2)):
+        sq = d * d
+        return np.sqrt((sq[:, order[0]] + sq[:, order[1]]) + sq[:, order[2]])
+
+    other = expected.copy()
     if edge_length:
         for a, b in zip(*np.triu_indices(ransac_n, 1), strict=True):
-            ls = np.linalg.norm(src[:, a] - src[:, b], axis=1)
-            lt = np.linalg.norm(tgt[:, a] - tgt[:, b], axis=1)
+            ls, lt = length(src[:, a] - src[:, b]), length(tgt[:, a] - tgt[:, b])
             expected &= (ls > edge_length * lt) & (lt > edge_length * ls)
+            ls, lt = (
+                length(src[:, a] - src[:, b], (1, 2, 0)),
+                length(tgt[:, a] - tgt[:, b], (1, 2, 0)),
+            )
+            other &= (ls > edge_length * lt) & (lt > edge_length * ls)
+        assert (other != expected).any()  # the boundary cases see the rounding
     assert 0 < expected.sum() < len(samples)
     np.testing.assert_array_equal(kept, expected)
 
