@@ -156,6 +156,15 @@ class RegistrationContext:
             )
         return self._global[which]
 
+    def clouds(
+        self, which: str = "full"
+    ) -> tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud]:
+        """The source and target at full resolution (``which="full"``) or as the global
+        step sees them (``"global"``)."""
+        if which == "full":
+            return self.source, self.target
+        return self.global_cloud("source"), self.global_cloud("target")
+
     def coarse(self) -> RegistrationContext:
         """A context whose clouds are this one's global clouds, at the same resolution
         (for cheap trial refinements); ``self`` when the global step does not downsample."""
@@ -214,10 +223,7 @@ class RegistrationContext:
         """Fitness, inlier RMSE and inlier pairs of ``transformation`` (centred frame)
         within ``max_correspondence_distance``, on the full-resolution clouds
         (``which="full"``) or the global step's (``"global"``)."""
-        if which == "full":
-            source, target = self.source, self.target
-        else:
-            source, target = self.global_cloud("source"), self.global_cloud("target")
+        source, target = self.clouds(which)
         distance = max_correspondence_distance
         with repeatable_open3d():
             result = reg.evaluate_registration(source, target, distance, transformation)

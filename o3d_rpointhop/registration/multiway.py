@@ -252,12 +252,10 @@ def _register_pair(source, target, prepared_source, prepared_target, settings, s
     edge = settings.edge_distance
     which = "global" if screen else "full"
     fitness = context.evaluate(local, edge, which).fitness if result.converged else 0.0
-    if screen:
-        clouds = context.global_cloud("source"), context.global_cloud("target")
-    else:
-        clouds = context.source, context.target
     with repeatable_open3d():
-        information = reg.get_information_matrix_from_point_clouds(*clouds, edge, local)
+        information = reg.get_information_matrix_from_point_clouds(
+            *context.clouds(which), edge, local
+        )
     return result.transformation, float(fitness), information
 
 

@@ -117,7 +117,7 @@ def test_full_resolution_false_keeps_every_pass_on_the_global_clouds(
     seen = []
 
     def spy(self, context, which, distance, init):
-        seen.append((which, len(self._clouds(context, which)[0].points)))
+        seen.append((which, len(context.clouds(which)[0].points)))
         return solve(self, context, which, distance, init)
 
     monkeypatch.setattr(step_class, "_solve", spy)

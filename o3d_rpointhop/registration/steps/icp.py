@@ -140,12 +140,6 @@ class _ICPStep(RegistrationStep):
         """One pass on the ``"full"`` or the ``"global"`` clouds."""
         raise NotImplementedError
 
-    @staticmethod
-    def _clouds(context: RegistrationContext, which: str):
-        if which == "full":
-            return context.source, context.target
-        return context.global_cloud("source"), context.global_cloud("target")
-
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distances = _distances(self.max_correspondence_distance, context)
         current = transformation
@@ -211,7 +205,7 @@ class PointToPointICP(_ICPStep):
         self.full_resolution = full_resolution
 
     def _solve(self, context, which, distance, init):
-        source, target = self._clouds(context, which)
+        source, target = context.clouds(which)
         estimation = _estimation(self.name, None)
         return _icp(self.name, source, target, distance, init, estimation, self.criteria())
 
@@ -263,7 +257,7 @@ class PointToPlaneICP(_ICPStep):
 
     def _solve(self, context, which, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
-        source, target = self._clouds(context, which)
+        source, target = context.clouds(which)
         target = context.with_normals(target, f"target-{which}", context.settings.normal_radius)
         return _icp(
             self.name,
@@ -321,7 +315,7 @@ class GeneralizedICP(_ICPStep):
 
     def _solve(self, context, which, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
-        source, target = self._clouds(context, which)
+        source, target = context.clouds(which)
         estimation = _estimation(self.name, kernel, self.epsilon)
         return _icp(self.name, source, target, distance, init, estimation, self.criteria())
 
