@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_points", "as_cloud_list", "is_open3d_cloud", "MAX_COORDINATE"]
+__all__ = ["as_points", "as_cloud_list", "as_viewpoints", "is_open3d_cloud", "MAX_COORDINATE"]
 
 #: Largest coordinate accepted: squared distances of larger ones overflow float64.
 MAX_COORDINATE = 1e150
@@ -150,3 +150,43 @@ def as_cloud_list(X: Any, name: str = "X") -> tuple[list[np.ndarray], str]:
             raise ValueError(f"{name} is an empty batch of point clouds")
         return [as_points(c, f"{name}[{i}]") for i, c in enumerate(arr)], "batch"
     return [as_points(arr, name)], "single"
+
+
+def as_viewpoints(viewpoints: Any, n_clouds: int, name: str = "viewpoints") -> list:
+    """Each cloud's sensor position, or None for each, from a user's ``viewpoints``.
+
+    Parameters
+    ----------
+    viewpoints : None, "origin", array-like of shape (3,) or (n_clouds, 3)
+        ``None``: no sensor is known. ``"origin"``: every cloud was seen from its own
+        coordinate origin (a scan in its sensor's frame, such as a 3DMatch fragment or
+        a LiDAR sweep). One position serves every cloud; ``(n_clouds, 3)`` gives one per
+        cloud, in that cloud's coordinates.
+    n_clouds : int
+    name : str, default="viewpoints"
+        How the argument is called in error messages.
+
+    Returns
+    -------
+    list of (ndarray of shape (3,) or None), one per cloud
+    """
+    if viewpoints is None:
+        return [None] * n_clouds
+    if isinstance(viewpoints, str):
+        if viewpoints != "origin":
+            raise ValueError(f"{name} must be None, 'origin' or positions, got {viewpoints!r}")
+        return [np.zeros(3)] * n_clouds
+    try:
+        arr = np.asarray(viewpoints, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be None, 'origin' or positions: {exc}") from None
+    if arr.shape == (3,):
+        arr = np.broadcast_to(arr, (n_clouds, 3))
+    if arr.shape != (n_clouds, 3):
+        raise ValueError(
+            f"{name} must be 'origin', one position (3,) or one per cloud ({n_clouds}, 3), "
+            f"got shape {arr.shape}"
+        )
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} holds NaN or infinite coordinates")
+    return [np.array(v) for v in arr]

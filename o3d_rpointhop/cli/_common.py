@@ -75,7 +75,35 @@ def add_descriptor(parser: argparse.ArgumentParser) -> None:
         "--descriptor",
         choices=DESCRIPTORS,
         default=DESCRIPTORS[0],
-        help="rpointhop (the model of --model) or fpfh (radii from the point spacing)",
+        help="rpointhop (the model of --model) or fpfh (radii from the resolution)",
+    )
+
+
+def _viewpoints(text: str):
+    """``--viewpoints``: ``origin``, or one or more positions ``x,y,z`` separated by
+    ``;`` (one per cloud, in that cloud's coordinates)."""
+    if text == "origin":
+        return text
+    try:
+        views = [[float(v) for v in part.split(",")] for part in text.split(";")]
+    except ValueError:
+        views = []
+    if not views or any(len(v) != 3 for v in views):
+        raise argparse.ArgumentTypeError(
+            f"expected 'origin' or positions 'x,y,z;x,y,z', got {text!r}"
+        )
+    return views
+
+
+def add_viewpoints(parser: argparse.ArgumentParser, clouds: str) -> None:
+    """``--viewpoints``: where the sensors stood."""
+    parser.add_argument(
+        "--viewpoints",
+        type=_viewpoints,
+        help="where the sensors stood: 'origin' (every cloud is in its sensor's frame: "
+        f"depth images, LiDAR sweeps, 3DMatch fragments) or 'x,y,z;...', one per {clouds}, "
+        "in its own coordinates; normals and local frames then face the sensor (default: "
+        "none known)",
     )
 
 
@@ -116,7 +144,7 @@ def descriptor_of(args: argparse.Namespace):
     if args.descriptor == "fpfh":
         if getattr(args, "model", None):
             raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
-        return FPFHTransformer(radius="auto", normal_radius="auto")
+        return FPFHTransformer()
     return load_model(args.model) if getattr(args, "model", None) else None
 
 

@@ -47,6 +47,19 @@ def add_parser(commands) -> None:
         "seeded) before registering",
     )
     p.add_argument(
+        "--with-consecutive",
+        action="store_true",
+        help="3DMatch: keep the pairs of consecutive fragments, which the official protocol "
+        "leaves out",
+    )
+    p.add_argument(
+        "--viewpoints",
+        choices=["origin", "none"],
+        default="origin",
+        help="3DMatch: tell the descriptors where the sensors stood ('origin', the default: "
+        "every fragment is in its camera's frame) or not ('none')",
+    )
+    p.add_argument(
         "--n-jobs",
         type=int,
         default=-1,
@@ -70,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
         return _multiway(args)
     if args.rotate and args.dataset != "3dmatch":
         raise CommandError("--rotate applies to 3dmatch (the object protocols rotate already)")
+    if args.dataset != "3dmatch" and (args.with_consecutive or args.viewpoints != "origin"):
+        raise CommandError("--with-consecutive and --viewpoints apply to 3dmatch")
     methods = args.methods.split(",") if args.methods else default_methods(args.dataset)
     model = load_model(args.model) if args.model else default_descriptor()
     common = dict(data=args.data, seed=args.seed, model=model, progress=not args.no_progress)
@@ -83,7 +98,13 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError("3dmatch has no protocols to choose")
         scenes = args.scenes.split(",") if args.scenes else None
         results = run_3dmatch(
-            methods, max_pairs=args.max_pairs, scenes=scenes, rotate=args.rotate, **common
+            methods,
+            max_pairs=args.max_pairs,
+            scenes=scenes,
+            rotate=args.rotate,
+            official=not args.with_consecutive,
+            viewpoints=None if args.viewpoints == "none" else "origin",
+            **common,
         )
     paths = write_report(results, args.output)
     print(markdown(results))  # with the timings: the terminal is not a result file

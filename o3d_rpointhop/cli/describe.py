@@ -7,7 +7,14 @@ import time
 
 import numpy as np
 
-from ._common import EXIT_OK, MAX_OUTPUT_BYTES, add_model, check_size, load_model
+from ._common import (
+    EXIT_OK,
+    MAX_OUTPUT_BYTES,
+    add_model,
+    add_viewpoints,
+    check_size,
+    load_model,
+)
 
 
 def add_parser(commands) -> None:
@@ -31,6 +38,7 @@ def add_parser(commands) -> None:
         type=int,
         help="project the descriptors on this many principal axes (pretrained: up to 128)",
     )
+    add_viewpoints(p, "cloud")
     p.set_defaults(func=run)
 
 
@@ -43,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     # 4 bytes a value, plus the header: refuse before spending the time.
     check_size(args.output, 4 * len(cloud.points) * model.n_features_out_, args.force)
     start = time.perf_counter()
-    desc = model.set_params(progress=None).transform(cloud)
+    desc = model.set_params(progress=None).transform(cloud, viewpoints=args.viewpoints)
     save_npy(args.output, np.ascontiguousarray(desc))
     print(
         f"{len(desc)} points described ({desc.shape[1]}-D) in "

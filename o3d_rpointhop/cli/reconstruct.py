@@ -15,6 +15,7 @@ from ._common import (
     add_descriptor,
     add_model,
     add_seed,
+    add_viewpoints,
     descriptor_of,
 )
 
@@ -35,6 +36,7 @@ def add_parser(commands) -> None:
     add_model(p, default="the ModelNet40 model on 128 axes")
     p.add_argument("--voxel-size", type=float, help="voxel of the merged cloud")
     p.add_argument("--n-jobs", type=int, help="parallel pair registrations")
+    add_viewpoints(p, "scan")
     add_seed(p)
     p.set_defaults(func=run)
 
@@ -50,7 +52,12 @@ def run(args: argparse.Namespace) -> int:
             check_output_path(out)
     scans = [read_cloud(p) for p in args.scans]
     result = register_multiway(
-        scans, descriptor_of(args), n_jobs=args.n_jobs, seed=args.seed, progress=None
+        scans,
+        descriptor_of(args),
+        viewpoints=args.viewpoints,
+        n_jobs=args.n_jobs,
+        seed=args.seed,
+        progress=None,
     )
     merged = result.merge(scans, voxel_size=args.voxel_size)
     write_cloud(args.output, merged)

@@ -15,6 +15,7 @@ from ._common import (
     add_json,
     add_model,
     add_seed,
+    add_viewpoints,
     auto_or,
     descriptor_of,
     flag_status,
@@ -69,6 +70,7 @@ def add_parser(commands) -> None:
         "states: 4096 for --model scene; else 2048)",
     )
     p.add_argument("--init", help="text file with a 4x4 start transformation (for ICP alone)")
+    add_viewpoints(p, "cloud (source first)")
     add_seed(p)
     p.add_argument("-o", "--output", help="write the aligned source cloud here")
     p.add_argument("--transform", help="write the transformation here (.txt: 4x4; .json: all)")
@@ -119,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
                 n_global_points=args.n_global_points,
                 init=init,
                 seed=args.seed,
+                viewpoints=args.viewpoints,
             )
     except ValueError as exc:  # name the files, not just "source" and "target"
         raise CommandError(f"{exc} (source: {args.source}, target: {args.target})") from exc

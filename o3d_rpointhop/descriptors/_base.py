@@ -10,7 +10,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClassNamePrefixFeaturesOutMixin, TransformerMixin
 
 from .._utils.parallel import map_clouds
-from .._utils.validation import as_cloud_list
+from .._utils.validation import as_cloud_list, as_viewpoints
 
 __all__ = ["BaseDescriptor"]
 
@@ -34,14 +34,15 @@ class BaseDescriptor(
 
     @abstractmethod
     def _per_cloud(self, X: Any, clouds: list[np.ndarray], kind: str, settings: Any) -> list:
-        """Check the clouds; return one list of per-cloud arguments of :meth:`_describe`
-        per extra argument it takes."""
+        """Check the clouds; return the per-cloud argument of :meth:`_describe`, one
+        per cloud."""
 
     @abstractmethod
-    def _describe(self, points: np.ndarray, *extras: Any) -> np.ndarray:
-        """Descriptors ``(n_points, n_features_out_)`` of one validated cloud."""
+    def _describe(self, points: np.ndarray, extra: Any, viewpoint: Any) -> np.ndarray:
+        """Descriptors ``(n_points, n_features_out_)`` of one validated cloud, with its
+        per-cloud argument from :meth:`_per_cloud` and its sensor position (or None)."""
 
-    def transform(self, X: Any) -> np.ndarray | list[np.ndarray]:
+    def transform(self, X: Any, viewpoints: Any = None) -> np.ndarray | list[np.ndarray]:
         """Describe every point of one or several clouds.
 
         Parameters
@@ -49,6 +50,15 @@ class BaseDescriptor(
         X : array-like of shape (n_points, 3) or (n_clouds, n_points, 3), \
                 open3d.geometry.PointCloud, or list of those
             Clouds of any size, in any position and metric scale.
+        viewpoints : None, "origin", array-like of shape (3,) or (n_clouds, 3), \
+                default=None
+            Where the sensor that saw each cloud stood, in that cloud's coordinates:
+            surface normals (and, for R-PointHop, every local frame's normal axis)
+            then face the sensor, as a scanned surface does. ``"origin"``: every cloud
+            is in its sensor's frame (a 3DMatch fragment, a LiDAR sweep, a depth
+            image's points). ``None``: no sensor is known, and the descriptor's own
+            rule orients them. The descriptors are exactly invariant to a rigid motion
+            that moves the viewpoint with the cloud.
 
         Returns
         -------
@@ -60,8 +70,34 @@ class BaseDescriptor(
         """
         settings = self._check_transform()
         clouds, kind = as_cloud_list(X)
+        views = as_viewpoints(viewpoints, len(clouds))
         extras = self._per_cloud(X, clouds, kind, settings)
-        return map_clouds(self._describe, clouds, kind, self.n_jobs, *extras)
+        return map_clouds(self._describe, clouds, kind, self.n_jobs, extras, views)
+
+    def fit_transform(self, X: Any, y: Any = None, viewpoints: Any = None) -> Any:
+        """:meth:`fit` then :meth:`transform`, with the same ``viewpoints``.
+
+        Parameters
+        ----------
+        X : point cloud(s)
+        y : None
+            Ignored.
+        viewpoints : None, "origin" or positions, default=None
+            As in :meth:`transform`.
+
+        Returns
+        -------
+        descriptors : as :meth:`transform` returns them
+        """
+        return self.fit(X, y, viewpoints=viewpoints).transform(X, viewpoints=viewpoints)
+
+    def at_resolution(self, voxel_size: float, settings: Any = None) -> BaseDescriptor:
+        """The descriptor a registration at resolution ``voxel_size`` describes with:
+        this one, unless it has distances left to the registration (FPFH's ``"auto"``
+        radii). ``settings``: the registration's
+        :class:`~o3d_rpointhop.registration.RegistrationSettings`, bound to the
+        resolution, whose multiples such distances follow."""
+        return self
 
     @property
     def _n_features_out(self) -> int:

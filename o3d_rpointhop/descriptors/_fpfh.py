@@ -7,11 +7,11 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
-from sklearn.base import _fit_context
+from sklearn.base import _fit_context, clone
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._utils.geometry import point_spacing
-from .._utils.validation import as_cloud_list, is_open3d_cloud
+from .._utils.validation import as_cloud_list, as_viewpoints, is_open3d_cloud
 from ._base import BaseDescriptor
 
 __all__ = ["FPFHTransformer", "FEATURE_RADIUS_FACTOR", "NORMAL_RADIUS_FACTOR"]
@@ -42,16 +42,17 @@ class FPFHTransformer(BaseDescriptor):
 
     Parameters
     ----------
-    radius : float or "auto", default=0.25
-        Search radius of the histograms, in the cloud's units. ``"auto"``:
-        :data:`FEATURE_RADIUS_FACTOR` (5) times the cloud's median nearest-neighbour
-        spacing (Open3D's tutorial ratio for a voxel-downsampled cloud). The default
-        suits ModelNet40-style objects in the unit sphere with about 1000 points.
+    radius : float or "auto", default="auto"
+        Search radius of the histograms, in the cloud's units. ``"auto"``: in a
+        registration, :data:`FEATURE_RADIUS_FACTOR` (5) times its resolution (the voxel
+        of its downsampled clouds: Open3D's tutorial, and the published pipelines at 5
+        cm voxels, 0.25 m); described alone, 5 times the cloud's median
+        nearest-neighbour spacing.
     max_nn : int, default=100
         Most neighbours used per histogram.
-    normal_radius : float or "auto", default=0.1
+    normal_radius : float or "auto", default="auto"
         Search radius for normal estimation; ``"auto"``: :data:`NORMAL_RADIUS_FACTOR`
-        (2) times the median spacing.
+        (2) times the registration's resolution, or alone, the median spacing.
     normal_max_nn : int, default=30
     use_existing_normals : bool, default=True
         Keep the normals of an Open3D point cloud that has them instead of re-estimating.
@@ -91,10 +92,10 @@ class FPFHTransformer(BaseDescriptor):
 
     def __init__(
         self,
-        radius: float | str = 0.25,
+        radius: float | str = "auto",
         *,
         max_nn: int = 100,
-        normal_radius: float | str = 0.1,
+        normal_radius: float | str = "auto",
         normal_max_nn: int = 30,
         use_existing_normals: bool = True,
         n_jobs: int | None = None,
@@ -114,7 +115,7 @@ class FPFHTransformer(BaseDescriptor):
                 raise ValueError(f"{name} must be finite, got {value!r}")
 
     @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X: Any = None, y: Any = None) -> FPFHTransformer:
+    def fit(self, X: Any = None, y: Any = None, viewpoints: Any = None) -> FPFHTransformer:
         """Check the parameters (and ``X`` if given); FPFH has nothing to learn, and
         :meth:`transform` works without fitting.
 
@@ -124,6 +125,8 @@ class FPFHTransformer(BaseDescriptor):
             Validated like in :meth:`transform`, then ignored.
         y : None
             Ignored.
+        viewpoints : None, "origin" or positions, default=None
+            Validated like in :meth:`transform` (with ``X``), then ignored.
 
         Returns
         -------
@@ -131,12 +134,32 @@ class FPFHTransformer(BaseDescriptor):
         """
         self._check_radii()
         if X is not None:
-            as_cloud_list(X)
+            as_viewpoints(viewpoints, len(as_cloud_list(X)[0]))
         self.n_features_in_ = 3
         self.n_features_out_ = N_FPFH_FEATURES
         return self
 
-    def _describe(self, points: np.ndarray, normals: np.ndarray | None) -> np.ndarray:
+    def at_resolution(self, voxel_size: float, settings: Any = None) -> FPFHTransformer:
+        """A copy whose ``"auto"`` radii are those of a registration at ``voxel_size``:
+        ``settings.feature_radius`` and ``settings.normal_radius`` (5 and 2
+        resolutions by default), or with no settings :data:`FEATURE_RADIUS_FACTOR` and
+        :data:`NORMAL_RADIUS_FACTOR` times ``voxel_size``; itself when no radius is
+        ``"auto"``."""
+        if "auto" not in (self.radius, self.normal_radius):
+            return self
+        if settings is None:
+            feature = FEATURE_RADIUS_FACTOR * voxel_size
+            normal = NORMAL_RADIUS_FACTOR * voxel_size
+        else:
+            feature, normal = settings.feature_radius, settings.normal_radius
+        return clone(self).set_params(
+            radius=feature if self.radius == "auto" else self.radius,
+            normal_radius=normal if self.normal_radius == "auto" else self.normal_radius,
+        )
+
+    def _describe(
+        self, points: np.ndarray, normals: np.ndarray | None, viewpoint: np.ndarray | None
+    ) -> np.ndarray:
         radius, normal_radius = self.radius, self.normal_radius
         if "auto" in (radius, normal_radius):
             spacing = point_spacing(points)
@@ -152,6 +175,8 @@ class FPFHTransformer(BaseDescriptor):
                     radius=normal_radius, max_nn=int(self.normal_max_nn)
                 )
             )
+        if viewpoint is not None:
+            cloud.orient_normals_towards_camera_location(viewpoint)
         feature = o3d.pipelines.registration.compute_fpfh_feature(
             cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=int(self.max_nn))
         )
@@ -169,7 +194,7 @@ class FPFHTransformer(BaseDescriptor):
         self._check_radii()
 
     def _per_cloud(self, X: Any, clouds: list[np.ndarray], kind: str, settings: None) -> list:
-        return [self._normals_of(X, len(clouds))]
+        return self._normals_of(X, len(clouds))
 
     @property
     def _n_features_out(self) -> int:

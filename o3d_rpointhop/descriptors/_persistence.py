@@ -3,9 +3,10 @@
 This module knows the file format, not the estimator: ``_rpointhop.py`` imports it and
 hands over the model (or its class); nothing here imports ``_rpointhop.py``.
 
-Layout (format version 3; version 1 files, without the PCA entries and the
-``sampling`` and ``n_components`` parameters, and version 2 files, without the
-``attributes`` parameter, still load)::
+Layout (format version 4; version 1 files, without the PCA entries and the
+``sampling`` and ``n_components`` parameters, version 2 files, without the
+``attributes`` parameter, and version 3 files, without the ``pooling`` parameter,
+still load)::
 
     metadata           0-d str array, JSON: format, format_version, library_version,
                        params, n_hops, n_features_out, n_training_clouds, and
@@ -36,7 +37,7 @@ import numpy as np
 from .._version import __version__
 
 FORMAT_NAME = "o3d-rpointhop-model"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 
 # Parameters stored in a model file (n_jobs and progress belong to the machine and the
 # user, not to the model).
@@ -49,6 +50,7 @@ _STORED_PARAMS = (
     "scale",
     "fit_subsample",
     "sampling",
+    "pooling",
     "n_components",
     "random_state",
 )

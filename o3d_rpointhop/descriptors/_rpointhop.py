@@ -15,11 +15,11 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from .._utils.validation import as_cloud_list
+from .._utils.validation import as_cloud_list, as_viewpoints
 from ._base import BaseDescriptor
 from ._persistence import load_model, save_model
 from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS, pretrained_path
-from .pointhop import SAMPLING_METHODS, HopConfig, HopTree
+from .pointhop import POOLINGS, SAMPLING_METHODS, HopConfig, HopTree, cloud_frames
 
 __all__ = ["RPointHopTransformer"]
 
@@ -80,6 +80,16 @@ class RPointHopTransformer(BaseDescriptor):
         square of the cloud). ``"poisson"``: a rigid-invariant Poisson-disk subsample
         in ``O(n log n)`` (see ``docs/algorithm.md``). ``"auto"``: FPS up to 16384
         points, Poisson disks above.
+    pooling : {"octants", "azimuth"}, default="octants"
+        How each neighbourhood is split into the eight bins its features are averaged
+        over. ``"octants"``: the octants of the point's local frame, R-PointHop's
+        pooling, which needs all three axes. ``"azimuth"``: above or below the tangent
+        plane, times four distance shells of equal area, with hop 1's coordinates as
+        distance from the normal axis, height and distance, and the neighbours' normals
+        as radial, tangential and normal components: only the frame's normal axis
+        counts, so nothing depends on the in-plane axes, which flat and cylindrical
+        surfaces (walls, floors, indoor scenes) leave undetermined. Best with
+        ``viewpoints``, which orient the normal axis.
     n_components : int, default=None
         If set, descriptors are projected on their ``n_components`` principal axes,
         learned by ``fit`` from the training descriptors (a PCA without whitening
@@ -174,6 +184,7 @@ class RPointHopTransformer(BaseDescriptor):
         "scale": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "fit_subsample": [None, Interval(Integral, 1, None, closed="left")],
         "sampling": [StrOptions(set(SAMPLING_METHODS))],
+        "pooling": [StrOptions(set(POOLINGS))],
         "n_components": [None, Interval(Integral, 1, None, closed="left")],
         "progress": [None, "boolean"],
         "n_jobs": [None, Integral],
@@ -191,6 +202,7 @@ class RPointHopTransformer(BaseDescriptor):
         scale: str | float = "auto",
         fit_subsample: int | None = None,
         sampling: str = "auto",
+        pooling: str = "octants",
         n_components: int | None = None,
         progress: bool | None = None,
         n_jobs: int | None = None,
@@ -204,6 +216,7 @@ class RPointHopTransformer(BaseDescriptor):
         self.scale = scale
         self.fit_subsample = fit_subsample
         self.sampling = sampling
+        self.pooling = pooling
         self.n_components = n_components
         self.progress = progress
         self.n_jobs = n_jobs
@@ -221,6 +234,7 @@ class RPointHopTransformer(BaseDescriptor):
             self.scale,
             self.sampling,
             self.attributes,
+            self.pooling,
         )
 
     def _check_sizes(self, clouds: list[np.ndarray], config: HopConfig, kind: str) -> None:
@@ -235,7 +249,7 @@ class RPointHopTransformer(BaseDescriptor):
 
     # ------------------------------------------------------------------ fitting
     @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X: Any, y: Any = None) -> RPointHopTransformer:
+    def fit(self, X: Any, y: Any = None, viewpoints: Any = None) -> RPointHopTransformer:
         """Learn the Saab kernels of every hop from unlabelled point clouds.
 
         Parameters
@@ -245,6 +259,10 @@ class RPointHopTransformer(BaseDescriptor):
             Training clouds; their sizes may differ.
         y : None
             Ignored.
+        viewpoints : None, "origin", array-like of shape (3,) or (n_clouds, 3), \
+                default=None
+            Where each training cloud's sensor stood (see :meth:`transform`): fit
+            with the viewpoints the model will be used with.
 
         Returns
         -------
@@ -253,6 +271,7 @@ class RPointHopTransformer(BaseDescriptor):
         """
         config = self._hop_config()
         clouds, kind = as_cloud_list(X)
+        views = as_viewpoints(viewpoints, len(clouds))
         if self.fit_subsample is not None:
             rng = check_random_state(self.random_state)
             clouds = [
@@ -269,6 +288,7 @@ class RPointHopTransformer(BaseDescriptor):
             n_components=self.n_components,
             n_jobs=self.n_jobs,
             progress=self.progress,
+            viewpoints=views,
         )
         self._set_tree(tree)
         self.n_features_in_ = 3
@@ -316,16 +336,53 @@ class RPointHopTransformer(BaseDescriptor):
 
     def _per_cloud(self, X: Any, clouds: list[np.ndarray], kind: str, config: HopConfig) -> list:
         self._check_sizes(clouds, config, kind)
-        return [[config] * len(clouds)]
+        return [config] * len(clouds)
 
-    def _describe(self, points: np.ndarray, config: HopConfig) -> np.ndarray:
+    def _describe(self, points: np.ndarray, config: HopConfig, viewpoint) -> np.ndarray:
         return self._tree().describe(
             points,
             config,
             n_components=self.n_components,
             n_threads=max(1, effective_n_jobs(self.n_jobs)),
             progress=self.progress,
+            viewpoint=viewpoint,
         )
+
+    def local_frames(self, X: Any, viewpoints: Any = None) -> np.ndarray | list[np.ndarray]:
+        """The local reference frame of every point, as the hops orient it.
+
+        Useful to look at, and to measure how well frames repeat between two scans
+        (:func:`o3d_rpointhop.evaluation.diagnostics.frame_repeatability`). Needs no
+        fitting: the frames depend only on ``lrf_neighbors`` and the viewpoints.
+
+        Parameters
+        ----------
+        X : point cloud(s)
+            As in :meth:`transform`.
+        viewpoints : None, "origin" or positions, default=None
+            As in :meth:`transform`.
+
+        Returns
+        -------
+        frames : ndarray of shape (n_points, 3, 3), or a list or stack of them
+            ``frames[i, :, j]`` is unit axis ``j`` of point ``i``, largest spread first;
+            axis 2 is the normal; ``det = +1``.
+        """
+        self._validate_params()
+        config = self._hop_config()
+        clouds, kind = as_cloud_list(X)
+        views = as_viewpoints(viewpoints, len(clouds))
+        for i, cloud in enumerate(clouds):
+            if len(cloud) < config.lrf_neighbors:
+                name = "X" if kind == "single" else f"X[{i}]"
+                raise ValueError(
+                    f"{name} has {len(cloud)} points, too few for lrf_neighbors="
+                    f"{config.lrf_neighbors}"
+                )
+        frames = [cloud_frames(c, config, v) for c, v in zip(clouds, views, strict=True)]
+        if kind == "single":
+            return frames[0]
+        return np.stack(frames) if kind == "batch" else frames
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -15,6 +15,7 @@ import open3d as o3d
 
 from .._utils.geometry import point_spacing
 from .._utils.threads import repeatable_open3d
+from .._utils.validation import as_viewpoints
 from ..open3d_interop import to_point_cloud
 from .defaults import DEFAULT_GLOBAL_POINTS, resolve_global_points
 from .quality import check_geometry
@@ -56,6 +57,11 @@ class RegistrationContext:
     features : (array-like, array-like), default=None
         ``descriptor``'s descriptors of the global clouds (source, target), one row per
         point, computed once by the caller. Needs ``descriptor``.
+    viewpoints : None, "origin" or (array-like, array-like), default=None
+        Where the sensors that saw the source and the target stood, in the caller's
+        coordinates of each cloud; ``"origin"``: each cloud is in its sensor's frame.
+        Passed to the descriptor's ``transform`` (``viewpoints=``), so that normals and
+        local frames face the sensor.
 
     Attributes
     ----------
@@ -71,6 +77,9 @@ class RegistrationContext:
     origin : ndarray of shape (3,)
         The caller's coordinates of the centred frame's origin (the target's centroid);
         ``source`` and ``target`` are in the centred frame.
+    viewpoints : dict or None
+        ``{"source": ..., "target": ...}``: the sensor positions in the centred frame,
+        or None when no viewpoints were given.
     """
 
     def __init__(
@@ -86,10 +95,18 @@ class RegistrationContext:
         settings: RegistrationSettings | None = None,
         global_clouds: tuple[Any, Any] | None = None,
         features: tuple[Any, Any] | None = None,
+        viewpoints: Any = None,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
         self.origin = np.asarray(self.target.get_center(), dtype=np.float64)
+        self.viewpoints = None
+        if viewpoints is not None:
+            views = as_viewpoints(viewpoints, 2)
+            self.viewpoints = {
+                which: view - self.origin
+                for which, view in zip(("source", "target"), views, strict=True)
+            }
         self.source.translate(-self.origin)
         self.target.translate(-self.origin)
         if check:
@@ -181,6 +198,7 @@ class RegistrationContext:
                 check=False,
                 settings=self.settings,
             )
+            self._coarse.viewpoints = self.viewpoints
             # The same frame as this context (its clouds are centred already, but their
             # own centroid may differ slightly): transformations carry over unchanged.
             self._coarse.source.translate(self._coarse.origin)
@@ -189,12 +207,22 @@ class RegistrationContext:
         return self._coarse
 
     def features(self, descriptor: Any, which: str) -> np.ndarray:
-        """Descriptors of the global cloud, computed once per descriptor object."""
+        """Descriptors of the global cloud, computed once per descriptor object, with the
+        distances it leaves to the registration at its resolution (``at_resolution``)
+        and with the viewpoints, if any."""
         key = (id(descriptor), which)
         if key not in self._features:
             cloud = self.global_cloud(which)
+            # Distances a descriptor leaves to the registration (FPFH's "auto" radii)
+            # follow its resolution.
+            at = getattr(descriptor, "at_resolution", None)
+            bound = descriptor if at is None else at(self.voxel_size, self.settings)
             try:
-                self._features[key] = np.asarray(descriptor.transform(cloud))
+                if self.viewpoints is None:
+                    described = bound.transform(cloud)
+                else:
+                    described = _transform_seen_from(bound, cloud, self.viewpoints[which])
+                self._features[key] = np.asarray(described)
             except ValueError as exc:
                 detail = (
                     f" (after voxel downsampling at {self.voxel_size:.6g})"
@@ -229,6 +257,19 @@ class RegistrationContext:
             result = reg.evaluate_registration(source, target, distance, transformation)
         info = {"max_correspondence_distance": distance}
         return StepResult.from_open3d("evaluation", result, 0.0, info, distance)
+
+
+def _transform_seen_from(descriptor: Any, cloud, viewpoint: np.ndarray) -> Any:
+    """``descriptor.transform(cloud, viewpoints=viewpoint)``, refused with a clear error
+    by a descriptor that takes no viewpoints."""
+    import inspect
+
+    if "viewpoints" not in inspect.signature(descriptor.transform).parameters:
+        raise TypeError(
+            f"viewpoints were given, but {type(descriptor).__name__}.transform takes none: "
+            "use a descriptor of this library, or leave viewpoints out"
+        )
+    return descriptor.transform(cloud, viewpoints=viewpoint)
 
 
 def global_points(points: Any, n_global_points: int = DEFAULT_GLOBAL_POINTS) -> np.ndarray:

@@ -25,12 +25,12 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
-from sklearn.utils._param_validation import HasMethods, Interval, validate_params
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions, validate_params
 
 from .._utils.geometry import point_spacing
 from .._utils.parallel import parallel_map, single_threaded
 from .._utils.threads import repeatable_open3d
-from .._utils.validation import as_points
+from .._utils.validation import as_points, as_viewpoints
 from ..open3d_interop import to_point_cloud
 from .context import RegistrationContext
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor
@@ -183,15 +183,20 @@ def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
     )
 
 
-def _prepare(points: np.ndarray, voxel: float, descriptor: Any):
-    """A scan's global cloud (at the common resolution) and its descriptors."""
+def _prepare(points: np.ndarray, voxel: float, descriptor: Any, viewpoint=None):
+    """A scan's global cloud (at the common resolution) and its descriptors (seen from
+    ``viewpoint``, the scan's sensor position, when given)."""
     # About the scan's own centroid: the voxel grid and the descriptors lose nothing far
     # from the origin.
     origin = points.mean(axis=0)
     down = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points - origin))
     down = down.voxel_down_sample(voxel).translate(origin)
-    features = np.asarray(descriptor.transform(np.asarray(down.points)))
-    return np.asarray(down.points), features
+    kept = np.asarray(down.points)
+    if viewpoint is None:
+        features = descriptor.transform(kept)
+    else:
+        features = descriptor.transform(kept, viewpoints=viewpoint)
+    return kept, np.asarray(features)
 
 
 class _Described:
@@ -377,6 +382,7 @@ def _optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettin
         "progress": [None, "boolean"],
         "seed": [Interval(Integral, 0, None, closed="left")],
         "settings": [None, RegistrationSettings],
+        "viewpoints": [None, StrOptions({"origin"}), "array-like"],
     },
     prefer_skip_nested_validation=False,  # the descriptor is the caller's, checked by itself
 )
@@ -384,6 +390,7 @@ def register_multiway(
     clouds: list[Any],
     descriptor: Any = None,
     *,
+    viewpoints: Any = None,
     n_global_points: int = DEFAULT_GLOBAL_POINTS,
     min_fitness: float = MIN_EDGE_FITNESS,
     n_jobs: int | None = None,
@@ -401,6 +408,10 @@ def register_multiway(
         ``None`` is ``register()``'s default (the pretrained R-PointHop model on 128
         principal axes); an ``FPFHTransformer`` works the same way. Each scan is
         described once.
+    viewpoints : None, "origin" or array-like of shape (n_scans, 3), default=None
+        Where each scan's sensor stood, in the scan's own coordinates; ``"origin"``:
+        every scan is in its sensor's frame. Normals and local frames then face the
+        sensor (see :func:`~o3d_rpointhop.register`). ``None``: no sensor is known.
     n_global_points : int, default=2048
         The common resolution keeps about this many points of the largest scan.
     min_fitness : float, default=0.3
@@ -431,12 +442,13 @@ def register_multiway(
     if len(clouds) < 2:
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
+    views = as_viewpoints(viewpoints, len(points))
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
     voxel = common_voxel(points, n_global_points)
     settings = (settings or RegistrationSettings()).at(voxel)
     prepared = parallel_map(
         _prepare,
-        [(p, voxel, worker) for p in points],
+        [(p, voxel, worker, view) for p, view in zip(points, views, strict=True)],
         n_jobs=n_jobs,
         progress=progress,
         desc="describe",

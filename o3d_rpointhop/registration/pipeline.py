@@ -104,6 +104,12 @@ class RegistrationPipeline(_BaseComposition):
     settings : RegistrationSettings, default=None
         The multiples of the resolution that distances the steps leave unset are
         derived from; ``None`` is ``RegistrationSettings()``.
+    viewpoints : None, "origin" or (array-like, array-like), default=None
+        Where the sensors that saw the source and the target stood, each in its own
+        cloud's coordinates; ``"origin"``: every cloud is in its sensor's frame (3DMatch
+        fragments, LiDAR sweeps, depth images). The descriptor's normals and local
+        frames then face the sensor, which makes them repeat between scans of a scene
+        (docs/algorithm.md, "Viewpoints"). ``None``: no sensor is known.
 
     Attributes
     ----------
@@ -126,6 +132,7 @@ class RegistrationPipeline(_BaseComposition):
         "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
         "seed": [Interval(Integral, 0, None, closed="left")],
         "settings": [None, RegistrationSettings],
+        "viewpoints": [None, StrOptions({"origin"}), "array-like"],
     }
 
     def __init__(
@@ -137,6 +144,7 @@ class RegistrationPipeline(_BaseComposition):
         n_global_points: int | str = "auto",
         seed: int = 0,
         settings: RegistrationSettings | None = None,
+        viewpoints: Any = None,
     ) -> None:
         self.steps = steps
         self.descriptor = descriptor
@@ -144,6 +152,7 @@ class RegistrationPipeline(_BaseComposition):
         self.n_global_points = n_global_points
         self.seed = seed
         self.settings = settings
+        self.viewpoints = viewpoints
 
     @property
     def named_steps(self) -> dict[str, RegistrationStep]:
@@ -263,6 +272,7 @@ class RegistrationPipeline(_BaseComposition):
             seed=self.seed,
             descriptor=getattr(self, "descriptor_", self.descriptor),
             settings=self.settings,
+            viewpoints=self.viewpoints,
         )
         return self._run(steps, context, init, start, True, stacklevel)
 
@@ -364,7 +374,14 @@ def _check_refinements(refine: Any) -> list:
         "init": ["array-like", None],
         **{
             name: RegistrationPipeline._parameter_constraints[name]
-            for name in ("descriptor", "voxel_size", "n_global_points", "seed", "settings")
+            for name in (
+                "descriptor",
+                "voxel_size",
+                "n_global_points",
+                "seed",
+                "settings",
+                "viewpoints",
+            )
         },
     },
     prefer_skip_nested_validation=False,  # steps given as objects are checked by the pipeline
@@ -381,6 +398,7 @@ def register(
     init: np.ndarray | None = None,
     seed: int = 0,
     settings: RegistrationSettings | None = None,
+    viewpoints: Any = None,
 ) -> RegistrationResult:
     """Register ``source`` to ``target``: a global estimate from descriptors, then ICP.
 
@@ -421,6 +439,12 @@ def register(
         The multiples of the resolution every unset distance is derived from (RANSAC's
         inlier distance, ICP's passes, the normals' radius, ...); ``None`` is
         ``RegistrationSettings()``.
+    viewpoints : None, "origin" or (array-like, array-like), default=None
+        Where the sensors stood: ``"origin"`` for scans in their sensor's frame (3DMatch
+        fragments, LiDAR sweeps, depth images), or ``(source_sensor, target_sensor)``,
+        each in its own cloud's coordinates. Normals and local frames then face the
+        sensor, so they repeat between scans (on indoor scans this is worth more than
+        any setting; docs/benchmarks.md). ``None``: no sensor is known.
 
     Returns
     -------
@@ -462,6 +486,7 @@ def register(
         n_global_points=n_global_points,
         seed=seed,
         settings=settings,
+        viewpoints=viewpoints,
     )
     # The warnings of a flagged result point at register()'s caller.
     return pipeline._register(pipeline._check(), source, target, init, stacklevel=5)

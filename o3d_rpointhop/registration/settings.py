@@ -94,6 +94,8 @@ class RegistrationSettings:
     edge_factor: float = 1.5
     consensus_factor: float = 1.5
     score_factor: float = 2.0
+    span_factor: float = 3.0
+    seed_factor: float = 2.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -165,6 +167,14 @@ class RegistrationSettings:
     @property
     def score_distance(self) -> float:
         return self._times(self.score_factor)
+
+    @property
+    def span_distance(self) -> float:
+        return self._times(self.span_factor)
+
+    @property
+    def seed_distance(self) -> float:
+        return self._times(self.seed_factor)
 
 
 def _positive(value: Any) -> bool:

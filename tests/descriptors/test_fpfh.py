@@ -6,6 +6,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 from helpers import NOT_APPLICABLE, assert_passes_check_estimator
+from scipy.spatial import cKDTree
 from sklearn.base import clone
 
 from o3d_rpointhop import FPFHTransformer
@@ -31,10 +32,15 @@ FPFH_NOT_APPLICABLE = {
 
 def test_matches_open3d_and_needs_no_fit():
     pts = make_object(500, shape_seed=1)
-    fpfh = FPFHTransformer()
+    fpfh = FPFHTransformer(radius=0.25, normal_radius=0.1)
     out = fpfh.transform(pts)  # no fit needed
     assert out.shape == (500, 33)
     np.testing.assert_allclose(out, _reference(pts))
+    # "auto" alone: 5 and 2 median spacings
+    spacing = np.median(cKDTree(pts).query(pts, k=2)[0][:, 1])
+    np.testing.assert_allclose(
+        FPFHTransformer().transform(pts), _reference(pts, 5 * spacing, 2 * spacing)
+    )
     fitted = clone(fpfh).fit(pts)
     assert fitted.n_features_in_ == 3 and fitted.n_features_out_ == 33
     assert list(fitted.get_feature_names_out()[:2]) == ["fpfhtransformer0", "fpfhtransformer1"]
@@ -52,6 +58,33 @@ def test_input_forms_and_existing_normals():
     assert [o.shape for o in outs] == [(400, 33), (300, 33)]
     batch = FPFHTransformer().transform(np.stack([pts, pts]))
     assert batch.shape == (2, 400, 33)
+
+
+def test_auto_radii_follow_a_registrations_resolution():
+    """In a registration, "auto" radii are multiples of its resolution (the settings'
+    5 and 2): register() describes its global clouds exactly as FPFH with those radii."""
+    from o3d_rpointhop.registration import RegistrationSettings
+    from o3d_rpointhop.registration.context import RegistrationContext
+
+    auto = FPFHTransformer()
+    bound = auto.at_resolution(0.04, RegistrationSettings().at(0.04))
+    assert (bound.radius, bound.normal_radius) == pytest.approx((0.2, 0.08))
+    assert auto.radius == "auto"  # a copy: the caller's object is unchanged
+    assert auto.at_resolution(0.04).radius == pytest.approx(0.2)
+    fixed = FPFHTransformer(radius=0.3, normal_radius="auto").at_resolution(0.04)
+    assert (fixed.radius, fixed.normal_radius) == pytest.approx((0.3, 0.08))
+    mine = FPFHTransformer(radius=0.3, normal_radius=0.1)
+    assert mine.at_resolution(0.04) is mine
+    settings = RegistrationSettings(feature_radius_factor=4.0)
+    context = RegistrationContext(
+        make_object(3000, shape_seed=4), make_object(3000, shape_seed=5), settings=settings
+    )
+    cloud = np.asarray(context.global_cloud("source").points)
+    voxel = context.voxel_size
+    np.testing.assert_allclose(
+        context.features(auto, "source"),
+        FPFHTransformer(radius=4 * voxel, normal_radius=2 * voxel).transform(cloud),
+    )
 
 
 def test_auto_radii_follow_the_units():

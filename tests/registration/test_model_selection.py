@@ -43,6 +43,7 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
         "n_global_points",
         "seed",
         "settings",
+        "viewpoints",
     }
 
 

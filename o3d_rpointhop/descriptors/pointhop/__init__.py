@@ -8,7 +8,16 @@ Modules: :mod:`._neighbors` (k-nearest-neighbour search), :mod:`._sampling`,
 """
 
 from ._config import SAMPLING_METHODS, HopConfig
-from ._geometry import CloudGeometry, build_geometry
+from ._geometry import CloudGeometry, build_geometry, cloud_frames
+from ._octants import POOLINGS
 from ._tree import HopTree
 
-__all__ = ["SAMPLING_METHODS", "CloudGeometry", "HopConfig", "HopTree", "build_geometry"]
+__all__ = [
+    "POOLINGS",
+    "SAMPLING_METHODS",
+    "CloudGeometry",
+    "HopConfig",
+    "HopTree",
+    "build_geometry",
+    "cloud_frames",
+]

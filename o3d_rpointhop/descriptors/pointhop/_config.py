@@ -41,6 +41,7 @@ class HopConfig:
     scale: str | float
     sampling: str = "auto"
     attributes: tuple[str, ...] = ("xyz",)
+    pooling: str = "octants"
 
     @property
     def hop1_dim(self) -> int:
@@ -56,11 +57,12 @@ class HopConfig:
         scale: str | float,
         sampling: str = "auto",
         attributes: Any = ("xyz",),
+        pooling: str = "octants",
     ) -> HopConfig:
         """The hop parameters, checked where a declarative constraint cannot say enough:
         the contents of the per-hop sequences (one hop size per neighbourhood size, all
         counts or all fractions, not increasing), attribute names and a finite scale.
-        ``lrf_neighbors``, ``sampling`` and the type of ``scale`` are taken as checked
+        ``lrf_neighbors``, ``sampling``, ``pooling`` and the type of ``scale`` are taken as checked
         by the estimator's ``_parameter_constraints``. Raises ValueError naming the bad
         parameter."""
         try:
@@ -102,6 +104,7 @@ class HopConfig:
             scale=scale,
             sampling=sampling,
             attributes=check_attributes(attributes),
+            pooling=pooling,
         )
 
     @property

@@ -52,7 +52,11 @@ _SKEW_TOLERANCE = 1e-9
 
 
 def local_reference_frames(
-    offsets: np.ndarray, k: int, towards: np.ndarray, return_eigenvalues: bool = False
+    offsets: np.ndarray,
+    k: int,
+    towards: np.ndarray,
+    return_eigenvalues: bool = False,
+    sensor: np.ndarray | None = None,
 ) -> tuple[np.ndarray, ...]:
     """Oriented, right-handed PCA frame of every neighbourhood, and the neighbours in it.
 
@@ -83,6 +87,12 @@ def local_reference_frames(
         centroid), used to orient axes along which the neighbours have no skew.
     return_eigenvalues : bool, default=False
         Also return the covariance eigenvalues.
+    sensor : ndarray of shape (3, q), default=None
+        Offset from each point to the sensor that saw it (a scan's viewpoint). Given,
+        the third axis (the normal) points towards the sensor, as a scanned surface
+        faces its scanner, instead of following the moment rule; where the normal is
+        perpendicular to the line of sight (to :data:`_SKEW_TOLERANCE` of its length)
+        the moment rule decides. The first axis keeps the moment rule.
 
     Returns
     -------
@@ -112,6 +122,10 @@ def local_reference_frames(
     tol = _SKEW_TOLERANCE * np.abs(support).max(axis=(0, 2))  # (q,)
     fallback = project(towards[:, :, None], axes)[:, :, 0]  # (3, q)
     skew = np.where(np.abs(skew) > tol, skew, fallback)
+    if sensor is not None:
+        facing = np.einsum("dq,qd->q", sensor, axes[:, :, 2])
+        seen = np.abs(facing) > _SKEW_TOLERANCE * np.sqrt((sensor**2).sum(axis=0))
+        skew[2] = np.where(seen, facing, skew[2])
     sign = np.where(skew < 0.0, -1.0, 1.0)
     # eigh's axes are orthonormal: the triple product is their determinant, +1 or -1.
     det = np.einsum("qi,qi->q", axes[:, :, 0], np.cross(axes[:, :, 1], axes[:, :, 2]))

@@ -33,10 +33,10 @@ from ._attributes import ATTRIBUTE_CHANNELS, eigen_features
 from ._config import HopConfig
 from ._frames import local_reference_frames, project
 from ._neighbors import NeighborIndex, drop_self
-from ._octants import N_OCTANTS, OctantPooling, octant_index, octant_means
+from ._octants import N_OCTANTS, OctantPooling, bin_index, cylindrical, octant_means
 from ._sampling import hop_subsets
 
-__all__ = ["CloudGeometry", "build_geometry", "cloud_scale"]
+__all__ = ["CloudGeometry", "build_geometry", "cloud_frames", "cloud_scale"]
 
 #: Points whose neighbourhoods (about 3 kB each in float64) are in memory at once.
 GEOMETRY_CHUNK = 16384
@@ -108,7 +108,11 @@ def _rows_in(sorted_ids: np.ndarray, start: int, stop: int) -> tuple[int, int]:
 
 
 def build_geometry(
-    points: np.ndarray, config: HopConfig, for_fit: bool, n_threads: int = 1
+    points: np.ndarray,
+    config: HopConfig,
+    for_fit: bool,
+    n_threads: int = 1,
+    viewpoint: np.ndarray | None = None,
 ) -> CloudGeometry:
     """Compute the hop structure of one validated cloud, large enough for ``config``
     (``config.shortfall(len(points))`` is None: the estimator checks it).
@@ -130,6 +134,10 @@ def build_geometry(
         Threads sharing the chunks (started for this call only). Every query's
         neighbourhood is worked on by itself, so the result does not depend on the
         chunks or the threads.
+    viewpoint : ndarray of shape (3,), default=None
+        Where the sensor that saw the cloud stands, in the cloud's coordinates: every
+        frame's normal axis then points towards it (see
+        :func:`~._frames.local_reference_frames`).
     """
     n = len(points)
     if not np.any(points != points[0]):
@@ -162,18 +170,16 @@ def build_geometry(
 
     def full_chunk(start: int, stop: int, index: NeighborIndex = index) -> None:
         nn_idx, nn_sq = index.query(points[start:stop], k_all)  # column 0: the point itself
-        offsets = np.take(planes, nn_idx, axis=1) - planes[:, start:stop, None]
         # Every hop expresses its neighbours in these frames. (The paper re-decides the
         # axis signs on each hop's neighbourhood; keeping the LRF's own signs, as the
         # authors' code does, is cheaper and matched slightly better on resampled
         # ModelNet40 pairs.)
-        towards = centroid - planes[:, start:stop]  # each point to the centroid
-        if eigenvalues is None:
-            frames[start:stop], local = local_reference_frames(offsets, k_lrf, towards)
-        else:
-            frames[start:stop], local, eigenvalues[start:stop] = local_reference_frames(
-                offsets, k_lrf, towards, return_eigenvalues=True
-            )
+        found = _chunk_frames(
+            planes, start, stop, nn_idx, k_lrf, centroid, viewpoint, eigenvalues is not None
+        )
+        frames[start:stop], local = found[0], found[1]
+        if eigenvalues is not None:
+            eigenvalues[start:stop] = found[2]
         mean_dist[start:stop] = np.sqrt(nn_sq[:, 1:k_lrf]).mean(axis=1)
         for h in full:
             k = config.n_neighbors[h]
@@ -181,12 +187,13 @@ def build_geometry(
             rows = queries[h][lo:hi] - start
             # Every query belongs to the searched cloud, so its first hit is itself.
             block = local[:, rows, 1 : k + 1]
-            octant = octant_index(block)
+            octant = bin_index(block, config.pooling)
             if h in keep:
                 octants[h][lo:hi] = octant
                 neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
             if h == 0:
-                hop1_sums[lo:hi] = octant_means(block, octant)
+                values = cylindrical(block) if config.pooling == "azimuth" else block
+                hop1_sums[lo:hi] = octant_means(values, octant)
 
     map_threads(full_chunk, _chunks(n, n_threads), n_threads)
     del index, full_chunk  # the whole cloud's k-d tree
@@ -202,7 +209,8 @@ def build_geometry(
                 idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
                 nb = drop_self(idx, sq, k)
                 offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
-                octants[h][lo:hi] = octant_index(project(offsets, frames[qry[lo:hi]]))
+                local = project(offsets, frames[qry[lo:hi]])
+                octants[h][lo:hi] = bin_index(local, config.pooling)
                 neighbours[h][lo:hi] = nb
 
             map_threads(sampled_chunk, _chunks(len(qry), n_threads), n_threads)
@@ -213,14 +221,52 @@ def build_geometry(
     hop1 = hop1_sums
     if len(config.attributes) > 1:
         extra = _neighbour_attributes(
-            config.attributes, queries[0], neighbours[0], octants[0], frames, eigenvalues, n_threads
+            config,
+            points,
+            queries[0],
+            neighbours[0],
+            octants[0],
+            frames,
+            eigenvalues,
+            n_threads,
         )
         hop1 = np.hstack([hop1, extra])
     return CloudGeometry(n_points=n, hop1_attributes=hop1, poolings=poolings)
 
 
+def _chunk_frames(planes, start, stop, nn_idx, k, centroid, viewpoint, eigen: bool):
+    """The frames of points ``start:stop`` of a cloud (``planes``, ``(3, n)``) from their
+    neighbours ``nn_idx`` (the first ``k`` define the frames), with every neighbour in
+    them, and the eigenvalues when ``eigen``; see :func:`~._frames.local_reference_frames`."""
+    offsets = np.take(planes, nn_idx, axis=1) - planes[:, start:stop, None]
+    towards = centroid - planes[:, start:stop]  # each point to the centroid
+    sensor = None if viewpoint is None else viewpoint[:, None] - planes[:, start:stop]
+    return local_reference_frames(offsets, k, towards, return_eigenvalues=eigen, sensor=sensor)
+
+
+def cloud_frames(
+    points: np.ndarray, config: HopConfig, viewpoint: np.ndarray | None = None
+) -> np.ndarray:
+    """The local reference frame of every point of a validated cloud, as the hops use
+    it: ``(n, 3, 3)``, ``frames[i, :, j]`` axis ``j`` of point ``i`` (the third is the
+    normal)."""
+    n = len(points)
+    frames = np.empty((n, 3, 3))
+    planes = np.ascontiguousarray(points.T)
+    centroid = points.mean(axis=0)[:, None]
+    index = NeighborIndex(points)
+    for start, stop in _chunks(n, 1):
+        nn_idx, _ = index.query(points[start:stop], config.lrf_neighbors)
+        chunk = _chunk_frames(
+            planes, start, stop, nn_idx, config.lrf_neighbors, centroid, viewpoint, False
+        )
+        frames[start:stop] = chunk[0]
+    return frames
+
+
 def _neighbour_attributes(
-    attributes: tuple[str, ...],
+    config: HopConfig,
+    points: np.ndarray,
     queries: np.ndarray,
     neighbours: np.ndarray,
     octants: np.ndarray,
@@ -229,11 +275,15 @@ def _neighbour_attributes(
     n_threads: int = 1,
 ) -> np.ndarray:
     """Octant means of the hop-1 neighbours' normals (in each query's frame) and
-    eigenvalue features, after ``"xyz"``, in the order of ``attributes``.
+    eigenvalue features, after ``"xyz"``, in the order of ``config.attributes``.
 
     A second pass over the hop-1 queries, in the same chunks as the first: every
     neighbour's own frame and eigenvalues are known only once the first pass is done.
+    With ``pooling="azimuth"`` a neighbour's normal is given by its components along
+    the query's normal, along the direction from the query's axis to the neighbour
+    (radial) and across it (tangential): nothing depends on the query's in-plane axes.
     """
+    attributes = config.attributes
     features = eigen_features(eigenvalues) if eigenvalues is not None else None
     width = sum(ATTRIBUTE_CHANNELS[a] for a in attributes[1:]) * N_OCTANTS
     out = np.empty((len(queries), width))
@@ -245,6 +295,8 @@ def _neighbour_attributes(
             if name == "normal":
                 # Neighbour j's normal (third axis of its frame) in query i's frame.
                 values = np.einsum("qkd,qdj->jqk", frames[nb, :, 2], frames[queries[lo:hi]])
+                if config.pooling == "azimuth":
+                    values = _about_the_normal(values, points, queries[lo:hi], nb, frames)
             else:
                 values = np.moveaxis(features[nb], 2, 0)  # (7, q, k)
             blocks.append(octant_means(values, octant))
@@ -252,3 +304,19 @@ def _neighbour_attributes(
 
     map_threads(chunk, _chunks(len(queries), n_threads), n_threads)
     return out
+
+
+def _about_the_normal(
+    normals: np.ndarray, points: np.ndarray, queries: np.ndarray, nb: np.ndarray, frames
+) -> np.ndarray:
+    """Neighbours' normals ``(3, q, k)`` in their queries' frames as radial,
+    tangential and normal components: unchanged by a turn of a frame about its normal
+    axis. A neighbour on the query's axis has no radial direction: both are 0 there."""
+    offsets = points[nb] - points[queries][:, None, :]  # (q, k, 3)
+    axes = frames[queries]
+    x = np.einsum("qkd,qd->qk", offsets, axes[:, :, 0])
+    y = np.einsum("qkd,qd->qk", offsets, axes[:, :, 1])
+    rho = np.sqrt(x * x + y * y)
+    inv = np.divide(1.0, rho, out=np.zeros_like(rho), where=rho > 0.0)
+    a, b = normals[0], normals[1]
+    return np.stack([(a * x + b * y) * inv, (b * x - a * y) * inv, normals[2]])

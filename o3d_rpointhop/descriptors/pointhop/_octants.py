@@ -2,6 +2,11 @@
 
 An octant with no neighbour takes the mean of the whole neighbourhood instead, so
 nothing is ever NaN and adding a constant to every value adds it to every octant mean.
+
+The eight bins are the octants of the local frame (:func:`octant_index`, R-PointHop's
+pooling), or, for ``pooling="azimuth"``, bins that use the frame's normal axis only
+(:func:`azimuth_bins`: above or below the tangent plane, times four distance shells),
+so that nothing depends on the in-plane axes, which indoor surfaces leave undetermined.
 """
 
 from __future__ import annotations
@@ -13,10 +18,20 @@ from ..._utils.threads import map_threads
 
 __all__ = [
     "N_OCTANTS",
+    "POOLINGS",
+    "azimuth_bins",
+    "bin_index",
+    "cylindrical",
     "octant_index",
     "octant_means",
     "OctantPooling",
 ]
+
+#: The ways a neighbourhood is split into its eight bins.
+POOLINGS = ("octants", "azimuth")
+#: Squared outer radii of the azimuth bins' inner three shells, as shares of the
+#: squared distance to the farthest neighbour: shells of equal area on a surface.
+_SHELLS_SQ = (0.25, 0.5, 0.75)
 
 N_OCTANTS = 8
 DTYPE = np.float32  # features from hop 2 on (see RPointHopTransformer.transform)
@@ -51,6 +66,45 @@ def octant_index(local: np.ndarray) -> np.ndarray:
         + (local[1] >= tol).astype(np.int64) * 2
         + (local[2] >= tol).astype(np.int64)
     )
+
+
+def azimuth_bins(local: np.ndarray) -> np.ndarray:
+    """Bin of every neighbour from the frame's normal axis alone: bit 2 for a
+    neighbour on the normal's side of the tangent plane (third coordinate >= 0, with
+    the same boundary tolerance as :func:`octant_index`), bits 0-1 the shell of its
+    distance, of equal area on a surface (outer radii sqrt(1/4), sqrt(1/2), sqrt(3/4)
+    and 1 times the farthest neighbour's distance).
+
+    A rotation of the frame about its normal axis leaves every bin as it is.
+
+    Parameters
+    ----------
+    local : ndarray of shape (3, q, k)
+
+    Returns
+    -------
+    bins : ndarray of shape (q, k), int64, values in 0..7
+    """
+    sq = (local**2).sum(axis=0)  # (q, k)
+    extent = np.sqrt(sq.max(axis=1))  # (q,)
+    tol = -_BOUNDARY_TOLERANCE * extent[:, None]
+    reach = sq.max(axis=1, keepdims=True)
+    shell = np.zeros(sq.shape, dtype=np.int64)
+    for share in _SHELLS_SQ:
+        shell += sq > share * reach
+    return (local[2] >= tol).astype(np.int64) * 4 + shell
+
+
+def bin_index(local: np.ndarray, pooling: str) -> np.ndarray:
+    """The bins of ``pooling`` (one of :data:`POOLINGS`) of neighbours ``(3, q, k)``."""
+    return azimuth_bins(local) if pooling == "azimuth" else octant_index(local)
+
+
+def cylindrical(local: np.ndarray) -> np.ndarray:
+    """Neighbour coordinates without the in-plane axes: distance from the normal axis,
+    height along it, and distance from the point, as planes ``(3, q, k)``."""
+    radial_sq = local[0] ** 2 + local[1] ** 2
+    return np.stack([np.sqrt(radial_sq), local[2], np.sqrt(radial_sq + local[2] ** 2)])
 
 
 def _counts(octant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

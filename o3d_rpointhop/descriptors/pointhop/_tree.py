@@ -69,14 +69,17 @@ class HopTree:
         n_components: int | None,
         n_jobs: int | None,
         progress: bool | None,
+        viewpoints: list[np.ndarray | None] | None = None,
     ) -> HopTree:
         """Fit hop after hop; every hop needs the previous hop's outputs of every cloud.
 
         Clouds whose structure and current features fit in :data:`FIT_CACHE_BYTES` are
         kept in memory between hops; the others are recomputed from scratch in every
         pass. With ``n_components``, one more pass gathers the covariance of the
-        descriptors.
+        descriptors. ``viewpoints``: each cloud's sensor position or None (see
+        :func:`~._geometry.build_geometry`).
         """
+        viewpoints = viewpoints if viewpoints is not None else [None] * len(clouds)
         tree = cls(kernels=[], means=[], energies=[], selected=[])
         n_threads = max(1, effective_n_jobs(n_jobs))  # over blocks of one cloud's points
         n_hops = config.n_hops
@@ -99,7 +102,7 @@ class HopTree:
                 if pca
                 else MomentAccumulator(len(parent_energy), config.hop1_dim if hop == 0 else 8)
             )
-            for i, geometry in _geometry_batches(clouds, config, cache, n_jobs):
+            for i, geometry in _geometry_batches(clouds, viewpoints, config, cache, n_jobs):
                 # Room for the structure and, later, the features it produces.
                 if hop == 0 and used + 2 * geometry.nbytes <= FIT_CACHE_BYTES:
                     cache[i] = geometry
@@ -272,8 +275,12 @@ class HopTree:
         n_components: int | None = None,
         n_threads: int = 1,
         progress: bool | None = None,
+        viewpoint: np.ndarray | None = None,
     ) -> np.ndarray:
         """One descriptor row per point of a validated cloud, float32.
+
+        ``viewpoint``: where the sensor stands, in the cloud's coordinates, or None
+        (see :func:`~._geometry.build_geometry`).
 
         The cloud is described in a spatial order (:func:`~._neighbors.spatial_order`;
         the result does not depend on it) and the last hop is evaluated block by block,
@@ -283,9 +290,13 @@ class HopTree:
         ``n_threads``, and nothing else.
         """
         with one_blas_thread():
-            return self._describe_blocks(points, config, n_components, n_threads, progress)
+            return self._describe_blocks(
+                points, config, n_components, n_threads, progress, viewpoint
+            )
 
-    def _describe_blocks(self, points, config, n_components, n_threads, progress) -> np.ndarray:
+    def _describe_blocks(
+        self, points, config, n_components, n_threads, progress, viewpoint
+    ) -> np.ndarray:
         projection = self.projection(n_components)
         n_out = self.n_full_features if n_components is None else int(n_components)
         bar = progress_bar(
@@ -296,7 +307,9 @@ class HopTree:
             large=len(points) >= 100_000,
         )
         order = spatial_order(points)
-        geometry = build_geometry(points[order], config, for_fit=False, n_threads=n_threads)
+        geometry = build_geometry(
+            points[order], config, for_fit=False, n_threads=n_threads, viewpoint=viewpoint
+        )
         last = len(self.kernels) - 1
         out = np.empty((geometry.n_points, n_out), dtype=np.float32)
         if last == 0:
@@ -323,7 +336,11 @@ def _hop_inputs(hop: int, geometry: CloudGeometry, previous: np.ndarray | None) 
 
 
 def _geometry_batches(
-    clouds: list[np.ndarray], config: HopConfig, cache: dict[int, CloudGeometry], n_jobs
+    clouds: list[np.ndarray],
+    viewpoints: list[np.ndarray | None],
+    config: HopConfig,
+    cache: dict[int, CloudGeometry],
+    n_jobs,
 ):
     """Yield ``(index, geometry)`` for every cloud; uncached ones are computed in
     parallel batches of ``n_jobs`` joblib tasks."""
@@ -333,7 +350,10 @@ def _geometry_batches(
         for start in range(0, len(clouds), chunk):
             idx = range(start, min(start + chunk, len(clouds)))
             missing = [i for i in idx if i not in cache]
-            computed = parallel(delayed(build_geometry)(clouds[i], config, True) for i in missing)
+            computed = parallel(
+                delayed(build_geometry)(clouds[i], config, True, viewpoint=viewpoints[i])
+                for i in missing
+            )
             fresh = dict(zip(missing, computed, strict=True))
             for i in idx:
                 yield i, cache[i] if i in cache else fresh[i]

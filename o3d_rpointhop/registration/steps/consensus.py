@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 from joblib import effective_n_jobs
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
@@ -18,6 +18,9 @@ from ._consensus import consensus
 from ._global import DESCRIPTOR, GlobalStep
 
 __all__ = ["ConsensusGlobal"]
+
+#: A distance that may also be 0 (off), or ``None`` (from the settings).
+_OPTIONAL_LENGTH = [None, Interval(Real, 0, None, closed="left")]
 
 
 class ConsensusGlobal(GlobalStep):
@@ -79,9 +82,15 @@ class ConsensusGlobal(GlobalStep):
         "both_directions": ["boolean"],
         "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
         "max_matches": [Interval(Integral, 3, None, closed="left")],
+        "cap": [StrOptions({"index", "distance"})],
         "score_distance": OPTIONAL_DISTANCE,
+        "second_order_distance": OPTIONAL_DISTANCE,
+        "min_span": _OPTIONAL_LENGTH,
+        "distinct_endpoints": ["boolean"],
         "n_seeds": [Interval(Integral, 1, None, closed="left")],
+        "seed_radius": _OPTIONAL_LENGTH,
         "set_size": [Interval(Integral, 2, None, closed="left")],
+        "weighted_refit": ["boolean"],
         "n_jobs": [None, Integral],
     }
 
@@ -95,9 +104,15 @@ class ConsensusGlobal(GlobalStep):
         both_directions: bool = True,
         max_ratio: float | None = None,
         max_matches: int = 5000,
+        cap: str = "distance",
         score_distance: float | None = None,
+        second_order_distance: float | None = None,
+        min_span: float | None = 0.0,
+        distinct_endpoints: bool = False,
         n_seeds: int = 5000,
+        seed_radius: float | None = 0.0,
         set_size: int = 30,
+        weighted_refit: bool = False,
         n_jobs: int | None = None,
     ) -> None:
         self.descriptor = descriptor
@@ -107,9 +122,15 @@ class ConsensusGlobal(GlobalStep):
         self.both_directions = both_directions
         self.max_ratio = max_ratio
         self.max_matches = max_matches
+        self.cap = cap
         self.score_distance = score_distance
+        self.second_order_distance = second_order_distance
+        self.min_span = min_span
+        self.distinct_endpoints = distinct_endpoints
         self.n_seeds = n_seeds
+        self.seed_radius = seed_radius
         self.set_size = set_size
+        self.weighted_refit = weighted_refit
         self.n_jobs = n_jobs
 
     def _matches(self, context: RegistrationContext) -> Correspondences:
@@ -126,7 +147,10 @@ class ConsensusGlobal(GlobalStep):
             first = np.sort(first)
             corr = Correspondences(pairs[first], distances[first], ratios[first])
         if len(corr) > self.max_matches:
-            keep = np.sort(np.argsort(corr.distances, kind="stable")[: self.max_matches])
+            if self.cap == "distance":
+                keep = np.sort(np.argsort(corr.distances, kind="stable")[: self.max_matches])
+            else:  # evenly by index: no region is favoured for its similar descriptors
+                keep = np.unique(np.linspace(0, len(corr) - 1, self.max_matches).astype(np.int64))
             corr = Correspondences(corr.pairs[keep], corr.distances[keep], corr.ratios[keep])
         return corr
 
@@ -136,14 +160,20 @@ class ConsensusGlobal(GlobalStep):
         corr = self._matches(context)
         src = np.asarray(context.global_cloud("source").points)
         tgt = np.asarray(context.global_cloud("target").points)
+        first = self.compatibility_distance or settings.consensus_distance
         found = consensus(
             src[corr.pairs[:, 0]],
             tgt[corr.pairs[:, 1]],
-            compatibility_threshold=self.compatibility_distance or settings.consensus_distance,
+            compatibility_threshold=first,
             inlier_threshold=distance,
             score_threshold=self.score_distance or settings.score_distance,
+            second_order_threshold=self.second_order_distance or first,
+            min_span=settings.span_distance if self.min_span is None else self.min_span,
+            endpoints=(corr.pairs[:, 0], corr.pairs[:, 1]) if self.distinct_endpoints else None,
             n_seeds=int(self.n_seeds),
+            seed_radius=settings.seed_distance if self.seed_radius is None else self.seed_radius,
             set_size=int(self.set_size),
+            weighted_refit=self.weighted_refit,
             n_threads=max(1, effective_n_jobs(self.n_jobs)),
         )
         return self._measured(
