@@ -155,10 +155,14 @@ def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
         assert set(protocol["per_scene"]["icp"]) == {scene}
         assert protocol["per_scene"]["icp"][scene]["pairs"] == 2
         recall = np.mean([r["registered"] for r in protocol["records"]["icp"]])
-        assert protocol["summary"]["icp"]["registration_recall"] == recall
+        assert protocol["summary"]["icp"]["registration_recall"] == recall  # one scene
+        fragments = [r["pair"].rsplit(" ", 1)[1].split("-") for r in protocol["records"]["icp"]]
+        assert all(int(j) > int(i) + 1 for i, j in fragments)  # official: none consecutive
         assert "summary_unseen_scenes" not in protocol  # every pair is in a seen scene
-        # Feature-match recall of the scene model, on the clouds register() gives it.
-        assert set(protocol["feature_match_recall"]) == {"fpfh", "scene"}
+        # The diagnostics of FPFH and of the scene model (with its frames), on the
+        # clouds register() gives each.
+        assert set(protocol["diagnostics"]) == {"fpfh", "scene"}
+        assert protocol["diagnostics"]["scene"]["frame_repeatability"] is not None
     paths = write_report(results, tmp_path)
     assert (tmp_path / "3dmatch_recall_vs_overlap.png").is_file()
     assert (

@@ -93,12 +93,13 @@ def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=Non
     for method in methods:
         recs = []
         for k, pair in enumerate(pairs):
-            estimate, seconds = run_method(
+            run = run_method(
                 method, pair.source, pair.target, descriptor=model, voxel=voxels[k], seed=seed
             )
-            rec = {**pair_errors(estimate, pair.truth), "seconds": seconds, "pair": pair.name}
+            rec = {**pair_errors(run.transformation, pair.truth), "seconds": run.seconds}
+            rec["pair"] = pair.name
             if shapes is not None:
-                rec["symmetric"] = is_symmetry(estimate, pair.truth, shapes[k])
+                rec["symmetric"] = is_symmetry(run.transformation, pair.truth, shapes[k])
             recs.append(rec)
             progress.step(method)
         summaries[method] = summarize(recs, *tol)

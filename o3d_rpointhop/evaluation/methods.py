@@ -27,24 +27,40 @@ from ..descriptors import FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration import RegistrationWarning, register
 
-__all__ = ["DATASETS", "METHODS", "Method", "default_methods", "check_methods", "run_method"]
+__all__ = [
+    "DATASETS",
+    "METHODS",
+    "Method",
+    "MethodRun",
+    "default_methods",
+    "check_methods",
+    "run_method",
+]
 
 reg = o3d.pipelines.registration
 
 
-def fpfh_recipe_cloud(points, voxel):
+def fpfh_recipe_cloud(points, voxel, viewpoint=None):
     """A cloud as Open3D's global registration tutorial prepares it: voxel-downsampled,
-    normals at 2 voxels, FPFH at 5 voxels; returns the cloud and its features."""
+    normals at 2 voxels (turned towards ``viewpoint`` when given, with Open3D's
+    ``orient_normals_towards_camera_location``), FPFH at 5 voxels; returns the cloud and
+    its features."""
     cloud = to_point_cloud(points).voxel_down_sample(voxel)
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+    if viewpoint is not None:
+        cloud.orient_normals_towards_camera_location(np.asarray(viewpoint, dtype=np.float64))
     feature = reg.compute_fpfh_feature(
         cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
     )
     return cloud, feature
 
 
-def _fpfh_recipe_inputs(source, target, voxel):
-    return (*fpfh_recipe_cloud(source, voxel), *fpfh_recipe_cloud(target, voxel))
+def _fpfh_recipe_inputs(source, target, voxel, viewpoints=None):
+    views = (None, None) if viewpoints is None else viewpoints
+    return (
+        *fpfh_recipe_cloud(source, voxel, views[0]),
+        *fpfh_recipe_cloud(target, voxel, views[1]),
+    )
 
 
 def feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
@@ -69,8 +85,8 @@ def feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
     return np.array(result.transformation)
 
 
-def _fpfh_ransac(source, target, voxel, seed):
-    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel)
+def _fpfh_ransac(source, target, voxel, seed, viewpoints=None):
+    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel, viewpoints)
     return feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=True)
 
 
@@ -80,20 +96,21 @@ def open3d_recipe_descriptor():
     return RPointHopTransformer.pretrained(n_components=32)
 
 
-def _rpointhop_open3d_ransac(source, target, voxel, seed, model):
+def _rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints=None):
     """docs/registration.md, "Inside Open3D's own pipeline", step for step."""
     from ..open3d_interop import to_open3d_feature
 
+    views = (None, None) if viewpoints is None else viewpoints
     src = to_point_cloud(source).voxel_down_sample(voxel)
     tgt = to_point_cloud(target).voxel_down_sample(voxel)
-    f_src = to_open3d_feature(model.transform(src))
-    f_tgt = to_open3d_feature(model.transform(tgt))
+    f_src = to_open3d_feature(model.transform(src, viewpoints=views[0]))
+    f_tgt = to_open3d_feature(model.transform(tgt, viewpoints=views[1]))
     # mutual_filter=False: RANSAC does the filtering, and Open3D prints no fallback warning.
     return feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=False)
 
 
-def _fpfh_fgr(source, target, voxel, seed):
-    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel)
+def _fpfh_fgr(source, target, voxel, seed, viewpoints=None):
+    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel, viewpoints)
     o3d.utility.random.seed(seed)
     result = reg.registration_fgr_based_on_feature_matching(
         src,
@@ -146,8 +163,10 @@ class Method:
     ----------
     name, description : str
     run : callable
-        ``run(source, target, descriptor, voxel, seed)`` -> the 4x4 source-to-target
-        transformation.
+        ``run(source, target, descriptor, voxel, seed, viewpoints)`` -> the 4x4
+        source-to-target transformation and whether the method claims it (``None`` for
+        a method that reports no such flag); ``viewpoints`` is None or the sensor
+        positions of the source and the target, each in its own coordinates.
     datasets : frozenset of str
         The datasets it can be run on.
     default_on : frozenset of str
@@ -169,11 +188,18 @@ class Method:
     open3d_only: bool = False
 
 
+def _claimed(result) -> tuple[np.ndarray, bool]:
+    """A result of :func:`~o3d_rpointhop.register` and whether its flags say it can be
+    trusted (converged, not ambiguous)."""
+    return result.transformation, bool(result.converged and not result.ambiguous)
+
+
 def _register_with(**options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options``."""
 
-    def run(source, target, descriptor, voxel, seed):
-        return register(source, target, descriptor, seed=seed, **options).transformation
+    def run(source, target, descriptor, voxel, seed, viewpoints):
+        result = register(source, target, descriptor, seed=seed, viewpoints=viewpoints, **options)
+        return _claimed(result)
 
     return run
 
@@ -181,24 +207,26 @@ def _register_with(**options):
 def _fpfh_recipe(voxel_of: Callable[[float], float] = lambda voxel: voxel, icp: bool = True):
     """Open3D's FPFH + RANSAC recipe (then its ICP) at ``voxel_of(voxel)``."""
 
-    def run(source, target, descriptor, voxel, seed):
+    def run(source, target, descriptor, voxel, seed, viewpoints):
         voxel = voxel_of(voxel)
-        estimate = _fpfh_ransac(source, target, voxel, seed)
-        return _recipe_icp(source, target, voxel, estimate) if icp else estimate
+        estimate = _fpfh_ransac(source, target, voxel, seed, viewpoints)
+        return (_recipe_icp(source, target, voxel, estimate) if icp else estimate), None
 
     return run
 
 
-def _run_fpfh_fgr(source, target, descriptor, voxel, seed):
-    return _fpfh_fgr(source, target, voxel, seed)
+def _run_fpfh_fgr(source, target, descriptor, voxel, seed, viewpoints):
+    return _fpfh_fgr(source, target, voxel, seed, viewpoints), None
 
 
 def _fpfh_pipeline(**options):
-    """FPFH (radii from the spacing) through :func:`~o3d_rpointhop.register`."""
+    """FPFH through :func:`~o3d_rpointhop.register`."""
 
-    def run(source, target, descriptor, voxel, seed):
-        fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
-        return register(source, target, fpfh, seed=seed, **options).transformation
+    def run(source, target, descriptor, voxel, seed, viewpoints):
+        result = register(
+            source, target, FPFHTransformer(), seed=seed, viewpoints=viewpoints, **options
+        )
+        return _claimed(result)
 
     return run
 
@@ -212,9 +240,10 @@ def kiss_matcher_available() -> bool:
     return True
 
 
-def _run_kiss_matcher(source, target, descriptor, voxel, seed):
+def _run_kiss_matcher(source, target, descriptor, voxel, seed, viewpoints):
     """KISS-Matcher's own pipeline (voxelisation, Faster-PFH, matching, ROBIN pruning,
-    GNC-TLS) at the resolution the other methods use; no refinement after it."""
+    GNC-TLS) at the resolution the other methods use; no refinement after it. It takes
+    no viewpoints; it claims the result it calls valid."""
     import kiss_matcher
 
     config = kiss_matcher.KISSMatcherConfig(voxel_size=float(voxel))
@@ -226,15 +255,15 @@ def _run_kiss_matcher(source, target, descriptor, voxel, seed):
     if solution.valid:
         out[:3, :3] = np.asarray(solution.rotation)
         out[:3, 3] = np.asarray(solution.translation).ravel()
-    return out
+    return out, bool(solution.valid)
 
 
-def _run_rpointhop_open3d(source, target, descriptor, voxel, seed):
-    estimate = _rpointhop_open3d_ransac(source, target, voxel, seed, _recipe_model())
-    return _recipe_icp(source, target, voxel, estimate)
+def _run_rpointhop_open3d(source, target, descriptor, voxel, seed, viewpoints):
+    estimate = _rpointhop_open3d_ransac(source, target, voxel, seed, _recipe_model(), viewpoints)
+    return _recipe_icp(source, target, voxel, estimate), None
 
 
-def _run_icp(source, target, descriptor, voxel, seed):
+def _run_icp(source, target, descriptor, voxel, seed, viewpoints):
     return np.array(
         reg.registration_icp(
             to_point_cloud(source),
@@ -243,7 +272,7 @@ def _run_icp(source, target, descriptor, voxel, seed):
             np.eye(4),
             reg.TransformationEstimationPointToPoint(False),
         ).transformation
-    )
+    ), None
 
 
 def _methods(*methods: Method) -> dict[str, Method]:
@@ -411,6 +440,27 @@ def check_methods(methods, dataset: str) -> list[str]:
     return methods
 
 
+@dataclass(frozen=True)
+class MethodRun:
+    """What one method did on one pair.
+
+    Attributes
+    ----------
+    transformation : ndarray of shape (4, 4)
+        Source to target.
+    seconds : float
+        Wall time, model loading left out.
+    claimed : bool or None
+        Whether the method's own flags call the result trustworthy (``register()``:
+        converged and not ambiguous; KISS-Matcher: valid); None for a method without
+        such a flag. Precision is measured over the claimed results.
+    """
+
+    transformation: np.ndarray
+    seconds: float
+    claimed: bool | None
+
+
 def run_method(
     name: str,
     source: np.ndarray,
@@ -419,8 +469,9 @@ def run_method(
     descriptor,
     voxel: float,
     seed: int = 0,
-) -> tuple[np.ndarray, float]:
-    """Run one method on one pair; return its transformation and wall time in seconds.
+    viewpoints=None,
+) -> MethodRun:
+    """Run one method on one pair.
 
     Parameters
     ----------
@@ -431,6 +482,14 @@ def run_method(
     voxel : float
         Resolution of the FPFH recipe and of ICP alone (0.05 for unit-sphere objects, as
         in the Open3D tutorial).
+    viewpoints : None or (array-like, array-like), default=None
+        The sensor positions of the source and the target, each in its own
+        coordinates: passed to every descriptor (R-PointHop's frames, FPFH's normals, in
+        this library and in Open3D's recipes); KISS-Matcher takes none.
+
+    Returns
+    -------
+    MethodRun
     """
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
@@ -456,7 +515,11 @@ def run_method(
         start = time.perf_counter()
         if method.open3d_only:
             with repeatable_open3d():
-                transformation = method.run(source, target, descriptor, voxel, seed)
+                transformation, claimed = method.run(
+                    source, target, descriptor, voxel, seed, viewpoints
+                )
         else:
-            transformation = method.run(source, target, descriptor, voxel, seed)
-        return transformation, time.perf_counter() - start
+            transformation, claimed = method.run(
+                source, target, descriptor, voxel, seed, viewpoints
+            )
+        return MethodRun(transformation, time.perf_counter() - start, claimed)

@@ -1,5 +1,5 @@
 """Registration error measures: the paper's Euler-angle errors, isotropic errors, success,
-and 3DMatch's official registration error and descriptor inlier ratio."""
+3DMatch's official registration error, and McNemar's test between two methods."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from ..transforms import apply_transform, euler_angles_deg, rotation_error_deg, 
 
 __all__ = [
     "is_symmetry",
-    "match_inliers",
     "mcnemar",
     "pair_errors",
     "rmse_3dmatch",
@@ -98,25 +97,6 @@ def rmse_3dmatch(estimate: np.ndarray, truth: np.ndarray, information: np.ndarra
         quat = -quat
     xi = np.r_[delta[:3, 3], quat[:3]]
     return float(np.sqrt(max(xi @ information @ xi / information[0, 0], 0.0)))
-
-
-def match_inliers(context, descriptor, truth: np.ndarray, radius: float = 0.1) -> tuple:
-    """The share and the number of the mutual nearest-descriptor matches between the
-    global clouds of a :class:`~o3d_rpointhop.registration.context.RegistrationContext`
-    that lie within ``radius`` of each other under ``truth`` (feature-match recall counts
-    a pair when the share exceeds 0.05)."""
-    from ..registration.correspondences import find_correspondences
-
-    src = np.asarray(context.global_cloud("source").points)
-    tgt = np.asarray(context.global_cloud("target").points)
-    corr = find_correspondences(
-        context.features(descriptor, "source"),
-        context.features(descriptor, "target"),
-        mutual_filter=True,
-    )
-    moved = apply_transform(src[corr.pairs[:, 0]], context.to_local(truth))
-    inside = np.linalg.norm(moved - tgt[corr.pairs[:, 1]], axis=1) < radius
-    return float(inside.mean()), int(inside.sum())
 
 
 def mcnemar(a: np.ndarray, b: np.ndarray) -> dict:

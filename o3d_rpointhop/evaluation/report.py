@@ -52,7 +52,10 @@ _COLUMNS = (
     ("mae_t", "MAE(t)", "{:.5f}"),
     ("rmse_t", "RMSE(t)", "{:.5f}"),
     ("median_rotation_error_deg", "median rot. err. deg", "{:.3f}"),
-    ("registration_recall", "registration recall", "{:.1%}"),
+    ("registration_recall", "registration recall (scene mean)", "{:.1%}"),
+    ("registration_recall_pairs", "recall, pair mean", "{:.1%}"),
+    ("recall_re_te", "recall by RE < 15 deg, TE < 30 cm", "{:.1%}"),
+    ("precision", "precision of claimed results", "{:.1%}"),
     ("median_translation_error", "median transl. err.", "{:.4f}"),
     ("seconds_per_pair", "s per pair", "{:.3f}"),
 )
@@ -80,7 +83,7 @@ def _scene_table(per_scene: dict, settings: dict) -> list[str]:
     lines.append("|---" * (len(methods) + 2) + "|")
     for scene in scenes:
         name = f"{scene} (a model of this run fitted on it)" if scene in seen else scene
-        cells = [f"{per_scene[m][scene]['registration_recall']:.0%}" for m in methods]
+        cells = [f"{per_scene[m][scene]['registration_recall']:.1%}" for m in methods]
         count = per_scene[methods[0]][scene]["pairs"]
         lines.append(f"| {name} | {count} | " + " | ".join(cells) + " |")
     return lines
@@ -95,6 +98,11 @@ def markdown(results: dict) -> str:
         f"{settings['numpy']}; seed {settings['seed']}. Timings: {results['dataset']}"
         "_timings.md."
     )
+    if "protocol" in settings:
+        lines.append(
+            f"Protocol: {settings['protocol']}; viewpoints given to the descriptors: "
+            f"{settings.get('viewpoints')}."
+        )
     if "model_file_bytes" in settings:
         lines.append(
             f"R-PointHop model: {settings['model_n_features_out']}-D descriptors, "
@@ -136,23 +144,40 @@ def markdown(results: dict) -> str:
             ]
         if "per_scene" in protocol:
             lines += ["", *_scene_table(protocol["per_scene"], settings)]
-        if "feature_match_recall" in protocol:
-            fmr = ", ".join(f"{k} {v:.1%}" for k, v in protocol["feature_match_recall"].items())
-            lines += ["", f"Feature-match recall (tau1 0.1 m, tau2 0.05): {fmr}."]
-        if "match_inliers" in protocol:
-            lines += [
-                "",
-                "Mutual matches within 0.1 m under the ground truth (medians over pairs):",
-                "",
-                "| descriptor | inlier ratio | inlier count |",
-                "|---|---|---|",
-            ]
-            for name, row in protocol["match_inliers"].items():
-                ratio, count = row["median_inlier_ratio"], row["median_inlier_count"]
-                lines.append(f"| {name} | {ratio:.1%} | {count:.0f} |")
+        if "diagnostics" in protocol:
+            lines += ["", *_diagnostics_table(protocol["diagnostics"])]
         if "paired" in protocol:
             lines += ["", *_paired_table(protocol["paired"])]
     return "\n".join(lines) + "\n"
+
+
+def _diagnostics_table(diagnostics: dict) -> list[str]:
+    """The descriptors' matches and frames (``evaluation.diagnostics``)."""
+
+    def cell(value, form):
+        return "-" if value is None else form.format(value)
+
+    lines = [
+        "Descriptors on the clouds register() describes with them (feature-match recall: "
+        "more than 5 % of the mutual matches within 0.1 m; medians over pairs; frames "
+        "within 25 deg at true correspondences, means over pairs):",
+        "",
+        "| descriptor | feature-match recall | inlier ratio | inlier count | correct "
+        "matches both ways | frames repeat | normals repeat | normal lines repeat |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, row in diagnostics.items():
+        cells = [
+            cell(row["feature_match_recall"], "{:.1%}"),
+            cell(row["median_inlier_ratio"], "{:.1%}"),
+            cell(row["median_inlier_count"], "{:.0f}"),
+            cell(row["median_correct_matches"], "{:.0f}"),
+            cell(row["frame_repeatability"], "{:.1%}"),
+            cell(row["normal_repeatability"], "{:.1%}"),
+            cell(row["normal_line_repeatability"], "{:.1%}"),
+        ]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def _paired_table(paired: dict) -> list[str]:

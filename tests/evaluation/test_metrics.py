@@ -1,20 +1,18 @@
-"""Benchmark metrics: errors, success, symmetry, 3DMatch error and inlier ratio."""
+"""Benchmark metrics: errors, success, symmetry, 3DMatch's official error (checked against
+hand computations from Choi et al.'s definition) and McNemar's test."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.evaluation.metrics import (
     is_symmetry,
-    match_inliers,
     mcnemar,
     pair_errors,
     rmse_3dmatch,
     summarize,
 )
-from o3d_rpointhop.transforms import apply_transform
 
 
 def test_errors_and_summary():
@@ -47,27 +45,84 @@ def test_symmetry_check():
     assert not is_symmetry(tilt, np.eye(4), cylinder)
 
 
-def test_3dmatch_error_and_match_inliers():
+def _motion(rotvec=(0.0, 0.0, 0.0), shift=(0.0, 0.0, 0.0)) -> np.ndarray:
     from scipy.spatial.transform import Rotation
 
-    from o3d_rpointhop import FPFHTransformer
-    from o3d_rpointhop.registration.context import RegistrationContext
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    out[:3, 3] = shift
+    return out
 
-    truth = np.eye(4)
-    truth[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
-    truth[:3, 3] = [0.5, 0.1, -0.2]
-    info = np.diag([2.0, 2.0, 2.0, 1.0, 1.0, 1.0])
-    assert rmse_3dmatch(truth, truth, info) == pytest.approx(0.0, abs=1e-12)
-    shifted = truth @ np.array([[1, 0, 0, 0.3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-    assert rmse_3dmatch(shifted, truth, info) == pytest.approx(0.3)  # sqrt(2 * 0.09 / 2)
 
-    target = make_object(800, shape_seed=3)
-    source = apply_transform(target, np.linalg.inv(truth))  # truth maps source to target
-    context = RegistrationContext(source, target)
-    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
-    ratio, count = match_inliers(context, fpfh, truth)
-    assert ratio > 0.5 and count > 10
-    assert match_inliers(context, fpfh, shifted, radius=0.1) == (0.0, 0)
+# An information matrix with every kind of entry: unequal diagonal, translation-
+# translation, rotation-rotation and translation-rotation couplings (symmetric, positive
+# definite), so that a mutant that drops a term or flips a sign shows.
+INFO = np.array(
+    [
+        [4.0, 0.5, 0.0, 0.3, 0.0, 0.2],
+        [0.5, 5.0, 0.1, 0.0, -0.4, 0.0],
+        [0.0, 0.1, 6.0, 0.0, 0.0, 0.7],
+        [0.3, 0.0, 0.0, 9.0, 0.2, 0.0],
+        [0.0, -0.4, 0.0, 0.2, 8.0, 0.1],
+        [0.2, 0.0, 0.7, 0.0, 0.1, 7.0],
+    ]
+)
+
+
+def test_3dmatch_error_of_a_pure_translation_by_hand():
+    t = np.array([0.1, -0.2, 0.3])
+    truth = _motion([0.4, -0.1, 0.2], [1.0, 2.0, 3.0])
+    estimate = truth @ _motion(shift=t)  # inv(truth) @ estimate is the pure translation
+    by_hand = t @ INFO[:3, :3] @ t / INFO[0, 0]
+    assert rmse_3dmatch(estimate, truth, INFO) == pytest.approx(np.sqrt(by_hand), rel=1e-12)
+    assert rmse_3dmatch(truth, truth, INFO) == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("angle", [0.3, 2.5, -2.5])
+def test_3dmatch_error_of_a_pure_rotation_by_hand(angle):
+    """About z by ``angle``: the quaternion's vector part is (0, 0, sin(angle / 2)) with
+    the scalar part made non-negative (the official nibabel convention), so turning the
+    other way by the same angle gives the same error."""
+    truth = _motion([0.0, 0.3, 0.0], [0.5, 0.0, -1.0])
+    estimate = truth @ _motion([0.0, 0.0, angle])
+    q = np.array([0.0, 0.0, abs(np.sin(angle / 2))])
+    by_hand = q @ INFO[3:, 3:] @ q / INFO[0, 0]
+    assert rmse_3dmatch(estimate, truth, INFO) == pytest.approx(np.sqrt(by_hand), rel=1e-12)
+
+
+@pytest.mark.parametrize("delta_rotvec", [(0.05, -0.08, 0.12), (0.1, -0.2, -2.4)])
+def test_3dmatch_error_of_a_composed_motion_where_order_and_sign_matter(delta_rotvec):
+    """The error is of ``inv(truth) @ estimate`` (in the target fragment's frame): the
+    translation-rotation couplings of the information matrix see the sign of the
+    quaternion's vector part (the scalar part is made non-negative; a turn of 2.4 rad
+    about -z is where a matrix-to-quaternion conversion may return it negative),
+    and composing the other way round moves the translation."""
+    from scipy.spatial.transform import Rotation
+
+    truth = _motion([1.2, -0.7, 0.4], [2.0, -1.0, 0.5])  # a large turn between fragments
+    delta_rotvec, delta_shift = np.array(delta_rotvec), np.array([0.04, 0.09, -0.06])
+    estimate = truth @ _motion(delta_rotvec, delta_shift)
+    half = np.linalg.norm(delta_rotvec) / 2
+    q = np.sin(half) * delta_rotvec / np.linalg.norm(delta_rotvec)  # w = cos(half) > 0
+    xi = np.r_[delta_shift, q]
+    by_hand = xi @ INFO @ xi / INFO[0, 0]
+    assert rmse_3dmatch(estimate, truth, INFO) == pytest.approx(np.sqrt(by_hand), rel=1e-10)
+    # What the mutants would compute differs by more than rounding: the other
+    # composition order, and the quaternion's other sign.
+    wrong_order = estimate @ np.linalg.inv(truth)
+    q_wrong = Rotation.from_matrix(wrong_order[:3, :3]).as_quat()
+    xi_wrong = np.r_[wrong_order[:3, 3], q_wrong[:3] * np.sign(q_wrong[3])]
+    assert abs(xi_wrong @ INFO @ xi_wrong / INFO[0, 0] - by_hand) > 0.01 * by_hand
+    flipped = np.r_[delta_shift, -q]
+    assert abs(flipped @ INFO @ flipped / INFO[0, 0] - by_hand) > 0.01 * by_hand
+
+
+def test_3dmatch_error_on_the_threshold():
+    """0.2 m of translation along x under an information matrix whose first entry
+    normalises it: an error of exactly 0.2."""
+    info = np.diag([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
+    truth = _motion([0.2, 0.1, 0.0])
+    assert rmse_3dmatch(truth @ _motion(shift=[0.2, 0.0, 0.0]), truth, info) == pytest.approx(0.2)
 
 
 def test_mcnemar_counts_discordant_pairs_and_gives_the_exact_p_value():
