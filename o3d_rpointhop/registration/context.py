@@ -62,6 +62,11 @@ class RegistrationContext:
         coordinates of each cloud; ``"origin"``: each cloud is in its sensor's frame.
         Passed to the descriptor's ``transform`` (``viewpoints=``), so that normals and
         local frames face the sensor.
+    up : None, array-like of shape (3,), or (array-like, array-like), default=None
+        Which way is up in the source and the target (one vector for both, or one
+        each): the global steps that can (RANSAC, the consensus) then reject
+        hypotheses that turn the source's up more than 90 degrees away from the
+        target's (upside down). ``None``: no prior.
 
     Attributes
     ----------
@@ -80,6 +85,8 @@ class RegistrationContext:
     viewpoints : dict or None
         ``{"source": ..., "target": ...}``: the sensor positions in the centred frame,
         or None when no viewpoints were given.
+    up : tuple of ndarray or None
+        The source's and the target's unit up vectors, or None.
     """
 
     def __init__(
@@ -96,10 +103,12 @@ class RegistrationContext:
         global_clouds: tuple[Any, Any] | None = None,
         features: tuple[Any, Any] | None = None,
         viewpoints: Any = None,
+        up: Any = None,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
         self.origin = np.asarray(self.target.get_center(), dtype=np.float64)
+        self.up = _up_vectors(up)
         self.viewpoints = None
         if viewpoints is not None:
             views = as_viewpoints(viewpoints, 2)
@@ -198,7 +207,7 @@ class RegistrationContext:
                 check=False,
                 settings=self.settings,
             )
-            self._coarse.viewpoints = self.viewpoints
+            self._coarse.viewpoints, self._coarse.up = self.viewpoints, self.up
             # The same frame as this context (its clouds are centred already, but their
             # own centroid may differ slightly): transformations carry over unchanged.
             self._coarse.source.translate(self._coarse.origin)
@@ -245,6 +254,14 @@ class RegistrationContext:
             self._normals[key] = copy
         return self._normals[key]
 
+    def upright(self, rotations: np.ndarray) -> np.ndarray:
+        """Which of the rotations ``(b, 3, 3)`` keep the source's up within 90 degrees
+        of the target's (all of them without an up prior)."""
+        if self.up is None:
+            return np.ones(len(rotations), dtype=bool)
+        source_up, target_up = self.up
+        return np.einsum("bij,j,i->b", rotations, source_up, target_up) > 0.0
+
     def evaluate(
         self, transformation: np.ndarray, max_correspondence_distance: float, which: str = "full"
     ) -> StepResult:
@@ -257,6 +274,24 @@ class RegistrationContext:
             result = reg.evaluate_registration(source, target, distance, transformation)
         info = {"max_correspondence_distance": distance}
         return StepResult.from_open3d("evaluation", result, 0.0, info, distance)
+
+
+def _up_vectors(up: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """``up`` as two unit vectors (source, target), or None; a clear error otherwise."""
+    if up is None:
+        return None
+    try:
+        arr = np.asarray(up, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"up must be a vector (3,) or two of them, got {up!r}: {exc}") from None
+    if arr.shape == (3,):
+        arr = np.stack([arr, arr])
+    norms = np.linalg.norm(arr, axis=-1) if arr.ndim == 2 else None
+    if arr.shape != (2, 3) or not np.isfinite(arr).all() or not (norms > 0).all():
+        raise ValueError(
+            f"up must be a non-zero vector (3,) or two of them (2, 3), got {arr.tolist()}"
+        )
+    return arr[0] / norms[0], arr[1] / norms[1]
 
 
 def _transform_seen_from(descriptor: Any, cloud, viewpoint: np.ndarray) -> Any:

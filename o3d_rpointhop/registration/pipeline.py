@@ -110,6 +110,11 @@ class RegistrationPipeline(_BaseComposition):
         fragments, LiDAR sweeps, depth images). The descriptor's normals and local
         frames then face the sensor, which makes them repeat between scans of a scene
         (docs/algorithm.md, "Viewpoints"). ``None``: no sensor is known.
+    up : None, array-like of shape (3,) or (array-like, array-like), default=None
+        Which way is up in the source and the target (one vector for both, or one
+        each): RANSAC and the consensus reject hypotheses that turn the source upside
+        down (its up more than 90 degrees from the target's). For data that has an up
+        (a LiDAR's z, a handheld camera's -y); off by default.
 
     Attributes
     ----------
@@ -133,6 +138,7 @@ class RegistrationPipeline(_BaseComposition):
         "seed": [Interval(Integral, 0, None, closed="left")],
         "settings": [None, RegistrationSettings],
         "viewpoints": [None, StrOptions({"origin"}), "array-like"],
+        "up": [None, "array-like"],
     }
 
     def __init__(
@@ -145,6 +151,7 @@ class RegistrationPipeline(_BaseComposition):
         seed: int = 0,
         settings: RegistrationSettings | None = None,
         viewpoints: Any = None,
+        up: Any = None,
     ) -> None:
         self.steps = steps
         self.descriptor = descriptor
@@ -153,6 +160,7 @@ class RegistrationPipeline(_BaseComposition):
         self.seed = seed
         self.settings = settings
         self.viewpoints = viewpoints
+        self.up = up
 
     @property
     def named_steps(self) -> dict[str, RegistrationStep]:
@@ -273,6 +281,7 @@ class RegistrationPipeline(_BaseComposition):
             descriptor=getattr(self, "descriptor_", self.descriptor),
             settings=self.settings,
             viewpoints=self.viewpoints,
+            up=self.up,
         )
         return self._run(steps, context, init, start, True, stacklevel)
 
@@ -381,6 +390,7 @@ def _check_refinements(refine: Any) -> list:
                 "seed",
                 "settings",
                 "viewpoints",
+                "up",
             )
         },
     },
@@ -399,6 +409,7 @@ def register(
     seed: int = 0,
     settings: RegistrationSettings | None = None,
     viewpoints: Any = None,
+    up: Any = None,
 ) -> RegistrationResult:
     """Register ``source`` to ``target``: a global estimate from descriptors, then ICP.
 
@@ -487,6 +498,7 @@ def register(
         seed=seed,
         settings=settings,
         viewpoints=viewpoints,
+        up=up,
     )
     # The warnings of a flagged result point at register()'s caller.
     return pipeline._register(pipeline._check(), source, target, init, stacklevel=5)

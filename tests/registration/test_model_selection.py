@@ -44,6 +44,7 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
         "seed",
         "settings",
         "viewpoints",
+        "up",
     }
 
 

@@ -296,6 +296,7 @@ def consensus(
     seed_radius: float | None = None,
     set_size: int = 30,
     weighted_refit: bool = False,
+    upright=None,
     n_threads: int = 1,
 ) -> ConsensusResult:
     """A rigid motion from putative matches ``source[i] <-> target[i]`` by consensus.
@@ -331,6 +332,9 @@ def consensus(
     weighted_refit : bool, default=False
         Weigh every match of the winner's refit by its truncated quadratic score
         within ``inlier_threshold``, rather than all inliers alike.
+    upright : callable, default=None
+        ``upright(rotations) -> bool mask``: hypotheses it rejects cannot win (an
+        up-axis prior); ``None`` keeps all.
     n_threads : int, default=1
         Threads of the compiled set building and scoring (the result does not depend
         on it).
@@ -364,12 +368,14 @@ def consensus(
             rot, shift = np.ascontiguousarray(rot), np.ascontiguousarray(shift)
             sq_score = float(score_threshold) ** 2
             score = _truncated_scores(rot, shift, source, target, sq_score)
-        best = int(np.argmax(score))  # the first of equal scores: deterministic
+        allowed = np.ones(len(score), dtype=bool) if upright is None else upright(rot)
+        best = int(np.argmax(np.where(allowed, score, -1.0)))  # the first of equal scores
+    if len(seeds) and allowed[best]:
         transformation[:3, :3], transformation[:3, 3] = rot[best], shift[best]
         transformation, inliers = _refit(
             transformation, source, target, sq_inlier, weighted=weighted_refit
         )
-    else:
+    else:  # no hypothesis, or none the up prior allows: no estimate
         inliers = _within(transformation, source, target, sq_inlier)
     # Back from the centred frame: x -> R (x - c) + t + c.
     transformation[:3, 3] += centre - transformation[:3, :3] @ centre

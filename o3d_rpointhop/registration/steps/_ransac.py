@@ -206,6 +206,7 @@ def ransac(
     seed: int,
     ransac_n: int = 3,
     clouds: tuple[np.ndarray, np.ndarray] | None = None,
+    upright=None,
 ) -> RansacResult:
     """Robust rigid fit to putative matches ``source[i] <-> target[i]``.
 
@@ -229,6 +230,9 @@ def ransac(
     clouds : (ndarray, ndarray), default=None
         The whole source and target clouds, to verify the best-ranked hypotheses by
         fitness; ``None`` keeps the hypothesis with the most inlier correspondences.
+    upright : callable, default=None
+        ``upright(rotations) -> bool mask``: hypotheses it rejects are dropped (an
+        up-axis prior); ``None`` keeps all.
 
     Returns
     -------
@@ -264,6 +268,8 @@ def ransac(
         rot, shift = rigid_transforms(src, tgt)
         moved = np.einsum("bij,bkj->bki", rot, src) + shift[:, None, :]
         ok = (((moved - tgt) ** 2).sum(axis=2) < sq_threshold).all(axis=1)
+        if upright is not None:
+            ok &= upright(rot)
         rot, shift = rot[ok], shift[ok]
         step = max(1, _SCORE_ELEMENTS // m)
         for lo in range(0, len(rot), step):

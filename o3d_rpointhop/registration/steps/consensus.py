@@ -174,6 +174,7 @@ class ConsensusGlobal(GlobalStep):
             seed_radius=settings.seed_distance if self.seed_radius is None else self.seed_radius,
             set_size=int(self.set_size),
             weighted_refit=self.weighted_refit,
+            upright=None if context.up is None else context.upright,
             n_threads=max(1, effective_n_jobs(self.n_jobs)),
         )
         return self._measured(

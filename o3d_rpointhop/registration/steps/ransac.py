@@ -108,6 +108,7 @@ class RANSACGlobal(GlobalStep):
             seed=context.seed,
             ransac_n=int(self.ransac_n),
             clouds=(src, tgt) if self.selection == "fitness" else None,
+            upright=None if context.up is None else context.upright,
         )
         return self._measured(
             context,
