@@ -56,6 +56,10 @@ class FPFHTransformer(BaseDescriptor):
     normal_max_nn : int, default=30
     use_existing_normals : bool, default=True
         Keep the normals of an Open3D point cloud that has them instead of re-estimating.
+    normalize : bool, default=False
+        Scale every histogram to unit length, as the published correspondence-graph
+        pipelines do before matching (PointDSC's features). On the training scenes of
+        3DMatch it registered fewer pairs (docs/benchmarks.md), so it is off.
     n_jobs : int, default=None
         Processes over clouds when transforming a list.
 
@@ -87,6 +91,7 @@ class FPFHTransformer(BaseDescriptor):
         "normal_radius": _RADIUS,
         "normal_max_nn": [Interval(Integral, 1, None, closed="left")],
         "use_existing_normals": ["boolean"],
+        "normalize": ["boolean"],
         "n_jobs": [None, Integral],
     }
 
@@ -98,6 +103,7 @@ class FPFHTransformer(BaseDescriptor):
         normal_radius: float | str = "auto",
         normal_max_nn: int = 30,
         use_existing_normals: bool = True,
+        normalize: bool = False,
         n_jobs: int | None = None,
     ) -> None:
         self.radius = radius
@@ -105,6 +111,7 @@ class FPFHTransformer(BaseDescriptor):
         self.normal_radius = normal_radius
         self.normal_max_nn = normal_max_nn
         self.use_existing_normals = use_existing_normals
+        self.normalize = normalize
         self.n_jobs = n_jobs
 
     def _check_radii(self) -> None:
@@ -180,7 +187,12 @@ class FPFHTransformer(BaseDescriptor):
         feature = o3d.pipelines.registration.compute_fpfh_feature(
             cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=int(self.max_nn))
         )
-        return np.asarray(feature.data).T
+        out = np.asarray(feature.data).T
+        if self.normalize:
+            # A point without neighbours has an all-zero histogram: it stays zero.
+            length = np.linalg.norm(out, axis=1, keepdims=True)
+            out = out / np.where(length > 0.0, length, 1.0)
+        return out
 
     def _normals_of(self, X: Any, n_clouds: int) -> list[np.ndarray | None]:
         """Normals carried by the Open3D clouds in ``X`` (None where there are none)."""

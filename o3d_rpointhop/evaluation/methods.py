@@ -188,6 +188,19 @@ class Method:
     open3d_only: bool = False
 
 
+#: Up in a camera's frame (image rows grow downwards): the up-axis prior of the 3DMatch
+#: methods that name it; between fragments the camera tilts by 15-45 degrees, so the
+#: prior only refuses upside-down hypotheses.
+CAMERA_UP = (0.0, -1.0, 0.0)
+
+
+def _sc2pcr(*args, **kwargs):
+    """The SC2-PCR peer step (:mod:`.sc2pcr`), imported when used."""
+    from .sc2pcr import SC2PCRGlobal
+
+    return SC2PCRGlobal(*args, **kwargs)
+
+
 def _claimed(result) -> tuple[np.ndarray, bool]:
     """A result of :func:`~o3d_rpointhop.register` and whether its flags say it can be
     trusted (converged, not ambiguous)."""
@@ -220,11 +233,15 @@ def _run_fpfh_fgr(source, target, descriptor, voxel, seed, viewpoints):
 
 
 def _fpfh_pipeline(**options):
-    """FPFH through :func:`~o3d_rpointhop.register`."""
+    """FPFH through :func:`~o3d_rpointhop.register` (a callable ``global_method`` makes
+    a fresh step per pair)."""
 
     def run(source, target, descriptor, voxel, seed, viewpoints):
+        chosen = dict(options)
+        if callable(chosen.get("global_method")):
+            chosen["global_method"] = chosen["global_method"]()
         result = register(
-            source, target, FPFHTransformer(), seed=seed, viewpoints=viewpoints, **options
+            source, target, FPFHTransformer(), seed=seed, viewpoints=viewpoints, **chosen
         )
         return _claimed(result)
 
@@ -319,6 +336,13 @@ METHODS = _methods(
         model="scene",
     ),
     Method(
+        "rpointhop-scene-up",
+        "R-PointHop, shipped scene model, register() defaults, up-axis prior (camera -y)",
+        _register_with(up=CAMERA_UP),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-ransac",
         "R-PointHop, shipped scene model + RANSAC + point-to-plane ICP",
         _register_with(global_method="ransac"),
@@ -388,6 +412,28 @@ METHODS = _methods(
         "FPFH through this library's consensus + ICP",
         _fpfh_pipeline(global_method="consensus"),
         default_on=_ALL,
+        model=None,
+    ),
+    Method(
+        "fpfh-pipeline-consensus-icp-4096",
+        "FPFH through this library's consensus + ICP, 4096 global points",
+        _fpfh_pipeline(global_method="consensus", n_global_points=4096),
+        datasets=_SCENES,
+        model=None,
+    ),
+    Method(
+        "fpfh-sc2pcr-icp",
+        "FPFH + SC2-PCR (from its paper, on the consensus's matches) + ICP",
+        _fpfh_pipeline(global_method=_sc2pcr),
+        datasets=_SCENES,
+        default_on=_SCENES,
+        model=None,
+    ),
+    Method(
+        "fpfh-pipeline-consensus-icp-up",
+        "FPFH through this library's consensus + ICP, up-axis prior (camera -y)",
+        _fpfh_pipeline(global_method="consensus", up=CAMERA_UP),
+        datasets=_SCENES,
         model=None,
     ),
     Method(

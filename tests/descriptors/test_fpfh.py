@@ -136,3 +136,14 @@ def test_parameters_are_validated_declaratively():
     ]:
         with pytest.raises(ValueError, match=name):
             FPFHTransformer(**bad).transform(cloud)
+
+
+def test_normalize_gives_unit_histograms_and_keeps_empty_ones_zero():
+    pts = make_object(500, shape_seed=6)
+    plain = FPFHTransformer(radius=0.25, normal_radius=0.1).transform(pts)
+    unit = FPFHTransformer(radius=0.25, normal_radius=0.1, normalize=True).transform(pts)
+    lengths = np.linalg.norm(plain, axis=1)
+    np.testing.assert_allclose(unit[lengths > 0], plain[lengths > 0] / lengths[lengths > 0, None])
+    lonely = np.vstack([pts, [[50.0, 50.0, 50.0]]])  # no neighbour within the radius
+    last = FPFHTransformer(radius=0.25, normal_radius=0.1, normalize=True).transform(lonely)[-1]
+    assert np.isfinite(last).all() and not last.any()
