@@ -11,9 +11,9 @@ __all__ = ["PRETRAINED_MODELS", "PRETRAINED_COMPONENTS", "pretrained_path"]
 #: The shipped models by name, and their files in ``o3d_rpointhop/data``.
 PRETRAINED_MODELS = {"modelnet40": "rpointhop_modelnet40.npz", "scene": "rpointhop_scene.npz"}
 #: What :meth:`RPointHopTransformer.pretrained` returns by default, by name: the
-#: ModelNet40 model's full descriptor (the paper's), and the scene model on the 128
+#: ModelNet40 model's full descriptor (the paper's), and the scene model on the 96
 #: principal axes it was chosen and measured with (docs/model_card.md).
-PRETRAINED_COMPONENTS = {"modelnet40": None, "scene": 128}
+PRETRAINED_COMPONENTS = {"modelnet40": None, "scene": 96}
 
 
 def pretrained_path(name: str) -> AbstractContextManager[Path]:

@@ -20,6 +20,7 @@ from ..registration.context import global_points
 
 __all__ = [
     "FIT_POINTS",
+    "FIT_VIEWPOINTS",
     "REGISTRATION_POINTS",
     "SCENE_PARAMS",
     "TRAINING_SCENES",
@@ -36,15 +37,23 @@ TRAINING_SCENES = (
     "sun3d-hotel_umd-maryland_hotel3",
     "sun3d-mit_lab_hj-lab_hj_tea_nov_2_2012_scan1_erika",
 )
-#: The scene model's settings: the paper's object hops with its scene attributes.
+#: The scene model's settings: the paper's scene attributes, one hop of 96 neighbours
+#: on 96 principal axes; chosen on pairs of the training scenes against 2 to 4 hops,
+#: azimuth pooling and other neighbourhood sizes (docs/benchmarks.md, "Scenes").
 SCENE_PARAMS = dict(
     attributes=("xyz", "normal", "eigen"),
     lrf_neighbors=64,
-    n_components=128,
+    n_neighbors=(96,),
+    hop_sizes=(1.0,),
+    n_components=96,
     random_state=0,
 )
-#: Every training fragment is downsampled as ``register()`` would for this many points.
-FIT_POINTS = 2048
+#: Every training fragment is downsampled as ``register()`` would for this many points
+#: (the density the model is used at).
+FIT_POINTS = 4096
+#: The fragments are fitted with their frames facing the sensor: every 3DMatch fragment
+#: is in its camera's frame, so the viewpoint is the origin.
+FIT_VIEWPOINTS = "origin"
 #: What a scene model tells ``register()`` (``registration_points_``): 4096 points per
 #: fragment, chosen on the training scenes (docs/benchmarks.md, "Scenes").
 REGISTRATION_POINTS = 4096
@@ -111,7 +120,9 @@ def fit_scene_model(
     clouds = []
     for scene in scenes:
         clouds += fragments.get(scene) or scene_fragments(scene, data, n_points)
-    model = RPointHopTransformer(**{**SCENE_PARAMS, **params}).fit(clouds)
+    model = RPointHopTransformer(**{**SCENE_PARAMS, **params}).fit(
+        clouds, viewpoints=FIT_VIEWPOINTS
+    )
     model.training_scenes_ = scenes
     model.registration_points_ = REGISTRATION_POINTS
     model.registration_global_method_ = REGISTRATION_GLOBAL_METHOD

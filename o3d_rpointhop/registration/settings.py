@@ -66,12 +66,21 @@ class RegistrationSettings:
     edge_factor : float, default=1.5
         Multiway registration: edge fitness, information matrices and the pose graph's
         correspondence distance.
-    consensus_factor : float, default=1.5
+    consensus_factor : float, default=2.0
         :class:`~o3d_rpointhop.ConsensusGlobal`: the largest length difference of two
-        compatible matches.
+        compatible matches (SC2-PCR's 10 cm at 3DMatch's 5 cm voxels).
+    second_order_factor : float, default=1.0
+        :class:`~o3d_rpointhop.ConsensusGlobal`: the length difference of its
+        second-order graph (SC2-PCR's 5 cm).
     score_factor : float, default=2.0
         :class:`~o3d_rpointhop.ConsensusGlobal`: the truncation of its hypotheses'
         score.
+    span_factor : float, default=3.0
+        :class:`~o3d_rpointhop.ConsensusGlobal`: the least sum of the two lengths (source
+        side plus target side) of two compatible matches.
+    seed_factor : float, default=2.0
+        :class:`~o3d_rpointhop.ConsensusGlobal`: the seed suppression radius, when it is
+        asked for (``seed_radius=None``).
 
     Examples
     --------
@@ -92,7 +101,8 @@ class RegistrationSettings:
     symmetry_factor: float = 2.0
     spread_factor: float = 3.0
     edge_factor: float = 1.5
-    consensus_factor: float = 1.5
+    consensus_factor: float = 2.0
+    second_order_factor: float = 1.0
     score_factor: float = 2.0
     span_factor: float = 3.0
     seed_factor: float = 2.0
@@ -163,6 +173,10 @@ class RegistrationSettings:
     @property
     def consensus_distance(self) -> float:
         return self._times(self.consensus_factor)
+
+    @property
+    def second_order_distance(self) -> float:
+        return self._times(self.second_order_factor)
 
     @property
     def score_distance(self) -> float:

@@ -47,8 +47,9 @@ def test_shipped_scene_model_comes_as_measured():
     scene = RPointHopTransformer.pretrained("scene")
     assert scene.registration_points_ == REGISTRATION_POINTS
     assert scene.registration_global_method_ == REGISTRATION_GLOBAL_METHOD == "consensus"
-    assert scene.n_features_out_ == 128  # the axes every scene result was measured with
-    assert RPointHopTransformer.pretrained("scene", n_components=None).n_features_out_ == 880
+    assert scene.n_features_out_ == 96  # the axes every scene result was measured with
+    assert scene.n_neighbors == (96,) and scene.hop_sizes == (1.0,)  # one hop
+    assert RPointHopTransformer.pretrained("scene", n_components=None).n_features_out_ == 104
     objects = RPointHopTransformer.pretrained()
     assert objects.n_features_out_ == 1624 and not hasattr(objects, "registration_points_")
     assert not hasattr(objects, "registration_global_method_")

@@ -78,14 +78,14 @@ def test_shipped_scene_model():
 
     path = files("o3d_rpointhop") / "data" / "rpointhop_scene.npz"
     assert path.stat().st_size < 2 * 1024**2
-    model = RPointHopTransformer.pretrained("scene", n_components=128)
+    model = RPointHopTransformer.pretrained("scene")
     assert model.attributes == SCENE
     assert len(model.training_scenes_) == 4 and all("-" in s for s in model.training_scenes_)
     # Scene folder names of 3DMatch test scenes; the other four are kept for held-out use.
     assert "7-scenes-redkitchen" in model.training_scenes_
     room = _room(3000, 5)
     out = model.transform(room)
-    assert out.shape == (3000, 128) and np.isfinite(out).all()
+    assert out.shape == (3000, 96) and np.isfinite(out).all()
     rot, shift = random_motion(5, 10.0)
     assert relative_difference(model.transform(room @ rot.T + shift), out) < 1e-4
     with pytest.raises(ValueError, match="unknown pretrained model 'kitchen'"):

@@ -123,3 +123,81 @@ def test_parameters_are_checked_with_the_step_named(object_model):
     cloud = make_object(800)
     with pytest.raises(ValueError, match="step 'global'.*'set_size' parameter"):
         register(cloud, cloud, object_model, global_method=ConsensusGlobal(set_size=1))
+
+
+def test_masks_drop_close_pairs_and_shared_endpoints():
+    """Exact matches are all compatible, until a pair lies too close on both sides (the
+    span mask) or shares a source or target point (the endpoint mask)."""
+    source, target, _, _ = synthetic_matches(300, 0.0, seed=2, noise=0.0)
+    span = np.linalg.norm(source[:, None] - source[None], axis=2) * 2  # both sides equal
+    plain = compatibility(source, target, 1e-6)
+    masked = compatibility(source, target, 1e-6, min_span=0.8)
+    off_diagonal = ~np.eye(300, dtype=bool)
+    np.testing.assert_array_equal(plain, off_diagonal)
+    np.testing.assert_array_equal(masked, off_diagonal & (span >= 0.8))
+    assert 0 < masked.sum() < plain.sum()
+    ids = np.arange(300)
+    shared = ids.copy()
+    shared[1] = 0  # matches 0 and 1 start at the same source point
+    ends = compatibility(source, target, 1e-6, endpoints=(shared, ids))
+    assert not ends[0, 1] and not ends[1, 0]
+    assert ends[0, 2] and ends[1, 2] and ends.sum() == plain.sum() - 2
+    back = compatibility(source, target, 1e-6, endpoints=(ids, np.where(ids == 5, 7, ids)))
+    assert not back[5, 7] and back.sum() == plain.sum() - 2
+
+
+def test_the_second_order_graph_is_the_tighter_threshold():
+    """With a second-order threshold below the first, the second graph holds exactly
+    the pairs whose length difference is below it."""
+    from o3d_rpointhop.registration.steps._consensus import _bits
+
+    source, target, _, _ = synthetic_matches(200, 0.5, seed=4, noise=0.01)
+    ds = np.linalg.norm(source[:, None] - source[None], axis=2)
+    dt = np.linalg.norm(target[:, None] - target[None], axis=2)
+    gap = np.abs(ds - dt)
+    first, second, degree = _bits(source, target, 0.05, 0.02, 0.0, None)
+
+    def dense(bits):
+        return np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")[:, :200] > 0
+
+    off = ~np.eye(200, dtype=bool)
+    np.testing.assert_array_equal(dense(first), off & (gap < 0.05))
+    np.testing.assert_array_equal(dense(second), off & (gap < 0.02))
+    np.testing.assert_array_equal(degree, (off & (gap < 0.05)).sum(axis=1))
+
+
+def test_seed_suppression_keeps_the_best_seed_of_a_neighbourhood():
+    from o3d_rpointhop.registration.steps._consensus import _seeds
+
+    source = np.array([[0.0, 0, 0], [0.01, 0, 0], [1.0, 0, 0], [1.0, 0.01, 0], [3.0, 0, 0]])
+    degree = np.array([5, 9, 4, 4, 1])
+    np.testing.assert_array_equal(_seeds(source, degree, 10, None), [0, 1, 2, 3])  # degree >= 2
+    # Within 5 cm: 1 beats 0 (higher degree), 2 beats 3 (a tie goes to the lower index).
+    np.testing.assert_array_equal(_seeds(source, degree, 10, 0.05), [1, 2])
+    np.testing.assert_array_equal(_seeds(source, degree, 1, 0.0), [1])
+
+
+@pytest.mark.parametrize("cap", ["index", "distance"])
+def test_the_cap_keeps_matches_spread_by_index_or_the_closest_descriptors(cap):
+    from o3d_rpointhop.registration.context import RegistrationContext
+
+    rng = np.random.default_rng(0)
+    cloud = rng.uniform(-1, 1, (400, 3))
+    features = rng.normal(size=(400, 8))
+    step = ConsensusGlobal(both_directions=False, max_matches=100, cap=cap)
+    noisy = features + rng.normal(scale=0.5, size=features.shape)
+    context = RegistrationContext(
+        cloud,
+        cloud,
+        voxel_size=0.05,
+        global_clouds=(cloud, cloud),
+        features=(features, noisy),
+        descriptor="given",  # stands for whatever computed the features
+    )
+    everything = ConsensusGlobal(both_directions=False, max_matches=400)._matches(context)
+    kept = step._matches(context)
+    assert len(everything) == 400 and len(kept) == 100
+    if cap == "index":
+        np.testing.assert_array_equal(kept.pairs[:, 0], np.linspace(0, 399, 100).astype(int))
+    else:
+        assert kept.distances.max() <= np.sort(everything.distances)[99]

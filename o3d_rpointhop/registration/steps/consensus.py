@@ -28,18 +28,20 @@ class ConsensusGlobal(GlobalStep):
 
     Matches are nearest descriptors (source to target and, with ``both_directions``,
     target to source too), optionally mutual and ratio-filtered, at most
-    ``max_matches`` of them by descriptor distance. Two matches are compatible when they
-    keep their length (to within ``compatibility_distance``): true matches form the
-    densest cluster of that graph. The ``n_seeds`` matches compatible with the most
+    ``max_matches`` of them. Two matches are compatible when they keep their length (to
+    within ``compatibility_distance``), lie far enough apart to say something about
+    the rotation (``min_span``) and do not share an endpoint: true matches form
+    the densest cluster of that graph. The ``n_seeds`` matches compatible with the most
     others seed hypotheses; each seed grows into a consensus set by second-order
-    compatibility (the number of matches compatible with both), each set gives a
-    weighted SVD fit, every fit is scored on all matches by a truncated quadratic of
-    their residuals (within ``score_distance``), and the best one is refitted on its
-    matches within ``max_correspondence_distance`` (after SC2-PCR, Chen et al. 2022; see
+    compatibility (the number of matches compatible with both, at the tighter
+    ``second_order_distance``), each set gives a weighted SVD fit, every fit is scored
+    on all matches by a truncated quadratic of their residuals (within
+    ``score_distance``), and the best one is refitted on its matches within
+    ``max_correspondence_distance`` (after SC2-PCR, Chen et al. 2022; see
     docs/consensus.md). Deterministic: no random draw.
 
-    The defaults (matches both ways, every match a seed) won on the training scenes of
-    3DMatch, for FPFH and for the scene model (docs/consensus.md).
+    The defaults won on every official pair of the training scenes of 3DMatch, for FPFH
+    and for the scene model (docs/consensus.md, "Chosen settings").
 
     Parameters
     ----------
@@ -49,8 +51,8 @@ class ConsensusGlobal(GlobalStep):
         Inlier distance of a match under a hypothesis; ``None`` is the settings'
         ``ransac_distance``.
     compatibility_distance : float, default=None
-        Largest length difference of two compatible matches; ``None`` is the settings'
-        ``consensus_distance``.
+        Largest length difference of two compatible matches (the first-order graph);
+        ``None`` is the settings' ``consensus_distance`` (2 resolutions).
     mutual_filter : bool, default=False
         Keep only mutual nearest descriptors.
     both_directions : bool, default=True
@@ -58,17 +60,37 @@ class ConsensusGlobal(GlobalStep):
         ``mutual_filter``, where both directions agree by definition).
     max_ratio : float, default=None
         Ratio-test threshold on the matches.
-    max_matches : int, default=5000
-        Most matches the graph is built on (the smallest descriptor distances); memory
-        grows with its square (100 MB at 5000).
+    max_matches : int, default=8000
+        Most matches the graph is built on; its two bit matrices take ``max_matches**2 /
+        4`` bytes (16 MB at 8000).
+    cap : {"index", "distance"}, default="index"
+        Which matches stay when there are more than ``max_matches``: evenly spread by
+        index (no region favoured), or the smallest descriptor distances (which favours
+        flat, repeated regions, whose descriptors are the most alike).
     score_distance : float, default=None
         Truncation of the hypotheses' score; ``None`` is the settings'
         ``score_distance``.
+    second_order_distance : float, default=None
+        Length difference within which two matches count as compatible when a seed's
+        set is grown (the second-order graph); ``None`` is the settings'
+        ``second_order_distance`` (1 resolution).
+    min_span : float, default=None
+        Two matches are compatible only when their lengths (source side plus target
+        side) sum to at least this: pairs close on both sides say nothing about the
+        rotation. ``None`` is the settings' ``span_distance`` (3 resolutions), 0 turns
+        the mask off.
+    distinct_endpoints : bool, default=True
+        Two matches that share a source or a target point are not compatible.
     n_seeds : int, default=5000
-        Most hypotheses: the matches compatible with the most others seed them (5000:
-        every match, at the default ``max_matches``).
+        Most hypotheses: the matches compatible with the most others seed them.
+    seed_radius : float, default=0.0
+        Seed suppression: a seed closer than this (in the source) to a better seed is
+        dropped; 0 turns it off, ``None`` is the settings' ``seed_distance``.
     set_size : int, default=30
         Partners of a seed in its consensus set.
+    weighted_refit : bool, default=False
+        Weight the final refit's matches by their residual (a truncated quadratic)
+        instead of equally.
     n_jobs : int, default=None
         Threads of the compiled set building and scoring (``None``: 1, ``-1``: all
         cores); the result does not depend on it.
@@ -103,12 +125,12 @@ class ConsensusGlobal(GlobalStep):
         mutual_filter: bool = False,
         both_directions: bool = True,
         max_ratio: float | None = None,
-        max_matches: int = 5000,
-        cap: str = "distance",
+        max_matches: int = 8000,
+        cap: str = "index",
         score_distance: float | None = None,
         second_order_distance: float | None = None,
-        min_span: float | None = 0.0,
-        distinct_endpoints: bool = False,
+        min_span: float | None = None,
+        distinct_endpoints: bool = True,
         n_seeds: int = 5000,
         seed_radius: float | None = 0.0,
         set_size: int = 30,
@@ -167,7 +189,7 @@ class ConsensusGlobal(GlobalStep):
             compatibility_threshold=first,
             inlier_threshold=distance,
             score_threshold=self.score_distance or settings.score_distance,
-            second_order_threshold=self.second_order_distance or first,
+            second_order_threshold=self.second_order_distance or settings.second_order_distance,
             min_span=settings.span_distance if self.min_span is None else self.min_span,
             endpoints=(corr.pairs[:, 0], corr.pairs[:, 1]) if self.distinct_endpoints else None,
             n_seeds=int(self.n_seeds),
