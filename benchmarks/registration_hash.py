@@ -73,7 +73,7 @@ def cases(data=None):
 
     default = RPointHopTransformer.pretrained(n_components=128)
     scene = RPointHopTransformer.pretrained("scene")
-    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
+    fpfh = FPFHTransformer()
     pairs = _object_pairs() + [_room_pair()]
     if data is not None:
         pairs += _real_pairs(data)

@@ -29,7 +29,7 @@ print(f"chance level (random match within 0.1 of the true spot): {near.mean() / 
 
 describers = (
     ("R-PointHop", RPointHopTransformer.pretrained()),
-    ("FPFH", FPFHTransformer(radius="auto", normal_radius="auto")),
+    ("FPFH", FPFHTransformer()),
 )
 for name, describer in describers:
     d_src, d_tgt = describer.transform(source), describer.transform(target)

@@ -29,7 +29,7 @@ except (FileNotFoundError, StopIteration):
     name = "two samplings of a synthetic room"
 
 scene = RPointHopTransformer.pretrained("scene")  # 128 axes, 4096 points, consensus
-fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
+fpfh = FPFHTransformer()
 print(f"{name}: {len(source)} and {len(target)} points")
 for label, result in (
     ("R-PointHop scene model", register(source, target, scene)),

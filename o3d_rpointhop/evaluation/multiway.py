@@ -159,11 +159,7 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
                 voxel = common_voxel(moved, DEFAULT_GLOBAL_POINTS)  # register_multiway's
                 result = open3d_multiway_recipe(moved, voxel, seed)
             else:
-                descriptor = (
-                    FPFHTransformer(radius="auto", normal_radius="auto")
-                    if method == "fpfh"
-                    else None
-                )
+                descriptor = FPFHTransformer() if method == "fpfh" else None
                 result = register_multiway(moved, descriptor, seed=seed, n_jobs=n_jobs)
             rows = []
             for k, n in enumerate(names):

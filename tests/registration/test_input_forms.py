@@ -112,7 +112,7 @@ def test_every_array_form_is_accepted_and_never_written(pretrained32, form, tmp_
             value.point.positions.numpy() if hasattr(value, "point") else np.asarray(value.points)
         )
     )
-    for descriptor in (pretrained32, FPFHTransformer(radius="auto", normal_radius="auto")):
+    for descriptor in (pretrained32, FPFHTransformer()):
         out = descriptor.transform(value)
         assert out.shape[0] == len(OBJECT) and np.isfinite(out).all()
     with warnings.catch_warnings():
@@ -133,7 +133,7 @@ def test_memory_mapped_input(pretrained32, tmp_path):
     np.save(tmp_path / "cloud.npy", OBJECT)
     mapped = np.load(tmp_path / "cloud.npy", mmap_mode="r")
     np.testing.assert_array_equal(pretrained32.transform(mapped), pretrained32.transform(OBJECT))
-    assert FPFHTransformer(radius="auto", normal_radius="auto").transform(mapped).shape == (
+    assert FPFHTransformer().transform(mapped).shape == (
         1024,
         33,
     )

@@ -74,7 +74,7 @@ def test_grid_search_over_descriptor_and_step_parameters():
 
 def test_fit_predict_score():
     X, y = object_pairs(2, seed=1)
-    pipe = _pipeline(FPFHTransformer(radius="auto", normal_radius="auto"))
+    pipe = _pipeline(FPFHTransformer())
     with pytest.raises(Exception, match="not fitted"):
         pipe.predict(X)
     assert pipe.fit(X) is pipe

@@ -71,7 +71,7 @@ def test_metric_scale_and_downsampling(object_model):
 
 def test_fpfh_descriptor_goes_through_the_same_pipeline(object_target):
     source, truth = moved_copy(object_target, 9)
-    result = register(source, object_target, FPFHTransformer(radius="auto", normal_radius="auto"))
+    result = register(source, object_target, FPFHTransformer())
     assert_close_pose(result.transformation, truth, 0.5, 0.01)
 
 

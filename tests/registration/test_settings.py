@@ -17,7 +17,7 @@ from o3d_rpointhop.datasets import make_object
 def test_settings_set_every_derived_distance():
     X, _ = object_pairs(1)
     source, target = X[0]
-    fpfh = FPFHTransformer(radius="auto", normal_radius="auto")
+    fpfh = FPFHTransformer()
     plain = register(source, target, fpfh)
     voxel = plain.voxel_size
     assert plain.steps[0].info["max_correspondence_distance"] == pytest.approx(1.5 * voxel)
