@@ -12,7 +12,7 @@ import open3d as o3d
 
 from ._utils.validation import as_points
 
-__all__ = ["read_cloud", "write_cloud", "OPEN3D_FORMATS"]
+__all__ = ["read_cloud", "write_cloud", "OPEN3D_FORMATS", "READ_FORMATS", "MESH_POINTS"]
 
 # Bytes per value of the PLY property types.
 _PLY_SIZES = {
@@ -106,32 +106,182 @@ def _quiet_open3d():
 # Extensions open3d.io.read_point_cloud understands.
 OPEN3D_FORMATS = (".ply", ".pcd", ".xyz", ".xyzn", ".xyzrgb", ".pts")
 _NUMPY_FORMATS = (".npy", ".npz", ".txt", ".csv")
+# Triangle meshes, sampled by area into a cloud (open3d.io.read_triangle_mesh).
+_MESH_FORMATS = (".obj", ".stl", ".off", ".glb", ".gltf")
+# Survey and driving formats, each through its own reader.
+_SURVEY_FORMATS = (".las", ".laz", ".e57", ".bin")
+#: Every extension :func:`read_cloud` reads.
+READ_FORMATS = OPEN3D_FORMATS + _NUMPY_FORMATS + _MESH_FORMATS + _SURVEY_FORMATS
+#: Points :func:`read_cloud` samples from a mesh when not told.
+MESH_POINTS = 100_000
+
+# The optional extra that brings each survey format's reader.
+_EXTRAS = {".las": ("laspy", "las"), ".laz": ("laspy", "las"), ".e57": ("pye57", "e57")}
 
 
-def read_cloud(path: str | os.PathLike) -> o3d.geometry.PointCloud:
-    """Read a point cloud from any format Open3D reads, or from numpy/text files.
+def _optional(module: str, suffix: str):
+    """The reader module for ``suffix``, or an ImportError naming the install line."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        extra = _EXTRAS[suffix][1]
+        raise ImportError(
+            f"reading {suffix} files needs {module}: pip install '.[{extra}]' in the "
+            f"project folder (or pip install {module}"
+            f"{' lazrs' if extra == 'las' else ''})"
+        ) from None
+
+
+def _cloud(points, colors=None, normals=None) -> o3d.geometry.PointCloud:
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    if colors is not None:
+        cloud.colors = o3d.utility.Vector3dVector(np.clip(colors, 0.0, 1.0))
+    if normals is not None:
+        cloud.normals = o3d.utility.Vector3dVector(normals)
+    return cloud
+
+
+def _unit_colors(channels: list[np.ndarray]) -> np.ndarray | None:
+    """Integer colour channels as floats in [0, 1] (8 or 16 bits, judged by the largest
+    value); None when every channel is zero (a format's colour fields left empty)."""
+    rgb = np.stack([np.asarray(c, dtype=np.float64) for c in channels], axis=1)
+    top = rgb.max(initial=0.0)
+    if top == 0:
+        return None
+    return rgb / (255.0 if top <= 255 else 65535.0)
+
+
+def _read_las(path: Path) -> o3d.geometry.PointCloud:
+    laspy = _optional("laspy", path.suffix.lower())
+    try:
+        las = laspy.read(str(path))
+    except Exception as exc:  # laspy raises its own errors, and OSError/ValueError
+        raise ValueError(f"{path}: damaged or unreadable {path.suffix} file ({exc})") from None
+    # Scaled coordinates in float64: survey offsets keep their millimetres.
+    points = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+    names = set(las.point_format.dimension_names)
+    colors = None
+    if {"red", "green", "blue"} <= names:
+        colors = _unit_colors([las.red, las.green, las.blue])
+    return _cloud(as_points(points, name=str(path)), colors)
+
+
+def _read_e57(path: Path) -> o3d.geometry.PointCloud:
+    pye57 = _optional("pye57", ".e57")
+    try:
+        e57 = pye57.E57(str(path))
+        scans = [
+            e57.read_scan(k, colors=True, ignore_missing_fields=True, transform=True)
+            for k in range(e57.scan_count)
+        ]
+    except Exception as exc:  # libE57's errors come as its own exception type
+        raise ValueError(f"{path}: damaged or unreadable .e57 file ({exc})") from None
+    if not scans:
+        raise ValueError(f"{path}: no scans in this .e57 file")
+    parts, colors = [], []
+    for scan in scans:
+        xyz = np.column_stack([scan["cartesianX"], scan["cartesianY"], scan["cartesianZ"]]).astype(
+            np.float64
+        )
+        parts.append(xyz)
+        if all(c in scan for c in ("colorRed", "colorGreen", "colorBlue")):
+            colors.append(_unit_colors([scan[c] for c in ("colorRed", "colorGreen", "colorBlue")]))
+        else:
+            colors.append(None)
+    points = as_points(np.concatenate(parts), name=str(path))
+    rgb = np.concatenate(colors) if all(c is not None for c in colors) else None
+    return _cloud(points, rgb)
+
+
+def _read_kitti(path: Path) -> o3d.geometry.PointCloud:
+    """A KITTI Velodyne sweep: float32 records of x, y, z, reflectance."""
+    size = path.stat().st_size
+    if size % 16:
+        raise ValueError(
+            f"{path}: not a KITTI .bin sweep ({size} bytes is not a whole number of "
+            "16-byte x, y, z, reflectance records)"
+        )
+    records = np.fromfile(path, dtype="<f4").reshape(-1, 4)
+    return _cloud(as_points(records[:, :3].astype(np.float64), name=str(path)))
+
+
+def _sample_mesh(path: Path, n_points: int) -> o3d.geometry.PointCloud:
+    """``n_points`` drawn uniformly by area from the mesh's triangles, with the
+    triangles' normals; a fixed seed (Open3D's own sampler draws from a process-wide
+    generator), so the same file gives the same cloud."""
+    with _quiet_open3d():
+        mesh = o3d.io.read_triangle_mesh(str(path))
+    vertices = np.asarray(mesh.vertices)
+    triangles = np.asarray(mesh.triangles)
+    if len(vertices) == 0:
+        raise ValueError(f"{path}: no vertices in this {path.suffix} file (empty, or damaged)")
+    as_points(vertices, name=str(path))
+    if len(triangles) == 0:  # a mesh file holding only points
+        return _cloud(vertices)
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    cross = np.cross(b - a, c - a)
+    area = np.linalg.norm(cross, axis=1)
+    if not area.sum() > 0:
+        raise ValueError(f"{path}: every triangle of this mesh has zero area")
+    rng = np.random.default_rng(0)
+    pick = rng.choice(len(triangles), size=n_points, p=area / area.sum())
+    u, v = rng.random((2, n_points))
+    flip = u + v > 1  # reflect into the triangle: uniform barycentric coordinates
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    points = a[pick] + u[:, None] * (b - a)[pick] + v[:, None] * (c - a)[pick]
+    normals = cross[pick] / np.maximum(area[pick], 1e-300)[:, None]
+    colors = None
+    if mesh.has_vertex_colors():
+        rgb = np.asarray(mesh.vertex_colors)
+        w = 1 - u - v
+        colors = (
+            w[:, None] * rgb[triangles[pick, 0]]
+            + u[:, None] * rgb[triangles[pick, 1]]
+            + v[:, None] * rgb[triangles[pick, 2]]
+        )
+    return _cloud(points, colors, normals)
+
+
+def read_cloud(
+    path: str | os.PathLike, *, mesh_points: int = MESH_POINTS
+) -> o3d.geometry.PointCloud:
+    """Read a point cloud from a scan, survey, mesh, numpy or text file.
 
     Parameters
     ----------
     path : str or path-like
-        ``.ply``, ``.pcd``, ``.xyz``, ``.xyzn``, ``.xyzrgb``, ``.pts`` (through Open3D),
-        ``.npy`` (an ``(n, 3+)`` array), ``.npz`` (its ``points`` array, or its only
-        array), ``.txt`` or ``.csv`` (whitespace- or comma-separated, first three columns).
+        By extension: ``.ply``, ``.pcd``, ``.xyz``, ``.xyzn``, ``.xyzrgb``, ``.pts``
+        (through Open3D); ``.las`` / ``.laz`` (laspy with its LAZ backend, the ``las``
+        extra; coordinates scaled and offset in float64, colours when the point format
+        has them); ``.e57`` (pye57, the ``e57`` extra; every scan, placed by its pose,
+        with colours when every scan has them); ``.bin`` (a KITTI Velodyne sweep);
+        ``.obj``, ``.stl``, ``.off``, ``.glb``, ``.gltf`` (a triangle mesh, sampled
+        uniformly by area, with the triangles' normals); ``.npy`` (an ``(n, 3+)``
+        array), ``.npz`` (its ``points`` array, or its only array), ``.txt`` or
+        ``.csv`` (whitespace- or comma-separated, first three columns).
+    mesh_points : int, default=MESH_POINTS
+        Points sampled from a mesh (seeded: the same file gives the same cloud).
 
     Returns
     -------
     open3d.geometry.PointCloud
-        With the file's normals and colours when Open3D read any.
+        With the file's normals and colours when it has any. Intensities and
+        reflectances are not kept (Open3D's point cloud has no field for them).
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
+    ImportError
+        If the format's optional reader is not installed (the message gives the
+        install line).
     ValueError
         If ``path`` is a directory or an empty file, the format is unknown, the file is
         damaged or truncated (a PLY file's header and size are checked before Open3D
-        reads it, so nothing is printed; other formats are refused when Open3D reads no
-        points), or it holds no points or non-finite coordinates.
+        reads it, so nothing is printed; other formats are refused when their reader
+        fails or reads no points), or it holds no points or non-finite coordinates.
 
     Notes
     -----
@@ -168,6 +318,16 @@ def read_cloud(path: str | os.PathLike) -> o3d.geometry.PointCloud:
             )
         as_points(cloud, name=str(path))  # finiteness check, naming the file
         return cloud
+    if suffix in (".las", ".laz"):
+        return _read_las(path)
+    if suffix == ".e57":
+        return _read_e57(path)
+    if suffix == ".bin":
+        return _read_kitti(path)
+    if suffix in _MESH_FORMATS:
+        if isinstance(mesh_points, bool) or not isinstance(mesh_points, int) or mesh_points < 1:
+            raise ValueError(f"mesh_points must be a positive int, got {mesh_points!r}")
+        return _sample_mesh(path, mesh_points)
     if suffix in _NUMPY_FORMATS:
         try:
             if suffix == ".npy":
@@ -190,8 +350,7 @@ def read_cloud(path: str | os.PathLike) -> o3d.geometry.PointCloud:
         points = as_points(arr, name=str(path))
         return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     raise ValueError(
-        f"{path}: unknown point cloud format {suffix!r}; use one of "
-        f"{', '.join(OPEN3D_FORMATS + _NUMPY_FORMATS)}"
+        f"{path}: unknown point cloud format {suffix!r}; use one of {', '.join(READ_FORMATS)}"
     )
 
 

@@ -32,12 +32,12 @@ fi
 stamp=.venv/.o3d-rpointhop-installed
 want=$(cksum pyproject.toml | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "setup: installing o3d-rpointhop and its test, plot and distributed extras"
+    echo "setup: installing o3d-rpointhop and its test, plot, distributed, survey-file and HDF5 extras"
     # pip's notices go to a log, shown only if the install fails.
     log=.venv/pip-install.log
     if ! { .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip &&
         .venv/bin/python -m pip install -q --disable-pip-version-check \
-            -e ".[test,plot,distributed]"; } > "$log" 2>&1; then
+            -e ".[test,plot,distributed,las,e57,h5]"; } > "$log" 2>&1; then
         cat "$log" >&2
         echo "setup: pip install failed (log above, also in $log)" >&2
         exit 1

@@ -28,6 +28,7 @@ LAYERS = {
     f"{TOP}.transforms": 1,
     f"{TOP}.open3d_interop": 1,
     f"{TOP}.io": 1,
+    f"{TOP}.poses": 1,
     f"{TOP}.plotting": 1,
     f"{TOP}.datasets": 1,
     f"{TOP}.descriptors": 2,

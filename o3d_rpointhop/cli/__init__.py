@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import benchmark, demo, describe, fit, reconstruct, register
+from . import benchmark, demo, describe, evaluate, fit, reconstruct, register
 from ._common import (
     EXIT_CODES,
     EXIT_ERROR,
@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 #: The commands, in the order ``--help`` lists them.
-COMMANDS = (demo, register, benchmark, reconstruct, fit, describe)
+COMMANDS = (demo, register, evaluate, benchmark, reconstruct, fit, describe)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -74,7 +74,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:
         if args.debug:
             raise
-        expected = isinstance(exc, (CommandError, ValueError, FileNotFoundError, OSError))
+        expected = isinstance(
+            exc, (CommandError, ValueError, FileNotFoundError, OSError, ImportError)
+        )
         detail = "" if expected else f"unexpected {type(exc).__name__}: "
         hint = "" if expected else f" (please report it; '{PROG} --debug ...' shows where)"
         print(f"{PROG}: error: {detail}{exc}{hint}", file=sys.stderr)

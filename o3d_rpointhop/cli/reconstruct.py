@@ -25,16 +25,40 @@ def add_parser(commands) -> None:
         "reconstruct",
         help="rebuild an object or scene from unposed scans (multiway registration)",
         description="Register every scan to scan 0 through a pose graph and write the "
-        "merged, voxel-downsampled cloud coloured by scan. Scans no other scan overlaps "
-        "are reported and left out (exit status 3).",
+        "merged cloud: every point of every placed scan with its colours and normals, "
+        "downsampled only with --voxel-size, coloured by scan with --colour-by-scan. "
+        "Scans no other scan overlaps are reported and left out (exit status 3).",
     )
-    p.add_argument("scans", nargs="+", help="two or more scans (.ply, .pcd, .xyz, .npy, ...)")
+    p.add_argument(
+        "scans", nargs="+", help="two or more scans (.ply, .las, .laz, .e57, .bin, .npy, ...)"
+    )
     p.add_argument("-o", "--output", required=True, help="merged cloud to write (.ply, ...)")
     p.add_argument("--poses", help="write the poses (scan -> scan 0), edges and flags as JSON")
     p.add_argument("--mesh", help="also write an Open3D Poisson surface mesh here")
+    p.add_argument(
+        "--pose-graph",
+        help="write the optimised pose graph in Open3D's JSON (open3d.io.read_pose_graph)",
+    )
+    p.add_argument(
+        "--trajectory", help="write the placed scans' poses (scan -> scan 0) as a trajectory"
+    )
+    p.add_argument(
+        "--trajectory-format",
+        choices=["kitti", "tum", "3dmatch"],
+        default="kitti",
+        help="format of --trajectory (default: kitti; 3dmatch: a .log of (0, k) records)",
+    )
+    p.add_argument(
+        "--result", help="save the whole result as JSON (MultiwayResult.load reads it back)"
+    )
     add_descriptor(p)
     add_model(p, default="the ModelNet40 model on 128 axes")
-    p.add_argument("--voxel-size", type=float, help="voxel of the merged cloud")
+    p.add_argument(
+        "--voxel-size", type=float, help="downsample the merged cloud (and the mesh) to this voxel"
+    )
+    p.add_argument(
+        "--colour-by-scan", action="store_true", help="paint each scan in its own colour"
+    )
     p.add_argument("--n-jobs", type=int, help="parallel pair registrations")
     add_viewpoints(p, "scan")
     add_seed(p)
@@ -45,9 +69,11 @@ def run(args: argparse.Namespace) -> int:
     import open3d as o3d
 
     from ..io import check_output_path, read_cloud, write_cloud
+    from ..poses import write_pose_graph, write_poses
     from ..registration import register_multiway
 
-    for out in (args.output, args.poses, args.mesh):
+    outputs = (args.output, args.poses, args.mesh, args.pose_graph, args.trajectory, args.result)
+    for out in outputs:
         if out:
             check_output_path(out)
     scans = [read_cloud(p) for p in args.scans]
@@ -59,11 +85,25 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         progress=None,
     )
-    merged = result.merge(scans, voxel_size=args.voxel_size)
+    merged = result.merge(scans, voxel_size=args.voxel_size, colour=args.colour_by_scan)
     write_cloud(args.output, merged)
     summary = result.as_dict(list(args.scans))
     if args.poses:
         Path(args.poses).write_text(json.dumps(summary, indent=2))
+    if args.pose_graph:
+        write_pose_graph(args.pose_graph, result.pose_graph)
+    if args.trajectory:
+        placed = [k for k, pose in enumerate(result.poses) if pose is not None]
+        write_poses(
+            args.trajectory,
+            [result.poses[k] for k in placed],
+            args.trajectory_format,
+            timestamps=[float(k) for k in placed],
+            pairs=[(0, k) for k in placed],
+            n_fragments=len(scans),
+        )
+    if args.result:
+        result.save(args.result)
     if args.mesh:
         mesh = result.mesh(scans, voxel_size=args.voxel_size)
         if not o3d.io.write_triangle_mesh(args.mesh, mesh):

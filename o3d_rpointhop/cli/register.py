@@ -32,8 +32,8 @@ def add_parser(commands) -> None:
         "register",
         help="align SOURCE to TARGET: global estimate from descriptors, then ICP",
         description="Align SOURCE to TARGET and print the 4x4 transformation that maps the "
-        "source into the target frame. Clouds: any format Open3D reads (.ply, .pcd, .xyz, "
-        "...) or .npy/.npz/.txt/.csv.",
+        "source into the target frame. Clouds: .ply, .pcd, .xyz, .pts, .las/.laz, .e57, "
+        "KITTI .bin, meshes (.obj, .stl, .off, .glb), .npy/.npz/.txt/.csv.",
     )
     p.add_argument("source")
     p.add_argument("target")
@@ -74,18 +74,13 @@ def add_parser(commands) -> None:
     add_seed(p)
     p.add_argument("-o", "--output", help="write the aligned source cloud here")
     p.add_argument("--transform", help="write the transformation here (.txt: 4x4; .json: all)")
+    p.add_argument(
+        "--result",
+        help="save the whole result (inlier pairs and every step) as JSON; "
+        "RegistrationResult.load reads it back",
+    )
     add_json(p)
     p.set_defaults(func=run)
-
-
-def _read_matrix(path: str) -> np.ndarray:
-    try:
-        matrix = np.loadtxt(path, ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise CommandError(f"cannot read a 4x4 matrix from {path}: {exc}") from exc
-    if matrix.shape != (4, 4):
-        raise CommandError(f"{path} holds a {matrix.shape} matrix, not 4x4")
-    return matrix
 
 
 def _refine_chain(args: argparse.Namespace) -> list[str]:
@@ -99,15 +94,16 @@ def _refine_chain(args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from ..io import check_output_path, read_cloud, write_cloud
+    from ..poses import read_matrix
     from ..registration import RegistrationWarning, register
 
     source = read_cloud(args.source)
     target = read_cloud(args.target)
-    for out in (args.output, args.transform):
+    for out in (args.output, args.transform, args.result):
         if out:
             check_output_path(out)
     descriptor = descriptor_of(args)
-    init = _read_matrix(args.init) if args.init else None
+    init = read_matrix(args.init) if args.init else None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RegistrationWarning)  # reported below, once
@@ -137,6 +133,9 @@ def run(args: argparse.Namespace) -> int:
         else:
             np.savetxt(args.transform, result.transformation, fmt="%.10f")
         summary["transform_file"] = args.transform
+    if args.result:
+        result.save(args.result)
+        summary["result_file"] = args.result
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

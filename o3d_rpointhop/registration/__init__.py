@@ -5,12 +5,14 @@ when none is given), :mod:`.settings` (the resolution and every distance derived
 it), :mod:`.context` (the clouds and caches one registration shares),
 :mod:`.correspondences` (descriptor matches), :mod:`.result` (what a registration
 returns), :mod:`.quality` (refused input and the result's flags), the steps in
-:mod:`.steps`, :mod:`.pipeline` (chains and ``register``), :mod:`.scoring` (recall for
+:mod:`.steps`, :mod:`.pipeline` (chains and ``register``), :mod:`.evaluate` (scoring a given
+transformation), :mod:`.scoring` (recall for
 model selection) and :mod:`.multiway` (pose graphs over many scans).
 """
 
 from .context import RegistrationContext
 from .correspondences import Correspondences, find_correspondences
+from .evaluate import evaluate
 from .multiway import MultiwayResult, register_multiway
 from .pipeline import RegistrationPipeline, register
 from .quality import RegistrationWarning
@@ -49,6 +51,7 @@ __all__ = [
     "SVDGlobal",
     "StepResult",
     "SymmetryCheck",
+    "evaluate",
     "find_correspondences",
     "register",
     "register_multiway",

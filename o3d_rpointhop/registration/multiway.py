@@ -17,6 +17,7 @@ ending on the full scans, then optimised again). Scans that no kept edge joins t
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -36,6 +37,7 @@ from .context import RegistrationContext
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor
 from .pipeline import RegistrationPipeline
 from .quality import RegistrationWarning
+from .result import _matrix, read_json, write_json
 from .settings import RegistrationSettings
 from .steps import PointToPlaneICP, RANSACGlobal
 
@@ -101,18 +103,24 @@ class MultiwayResult:
     seconds: float = 0.0
 
     def merge(
-        self, clouds: list[Any], *, voxel_size: float | None = None, colour: bool = True
+        self,
+        clouds: list[Any],
+        *,
+        voxel_size: float | str | None = "auto",
+        colour: bool = True,
     ) -> o3d.geometry.PointCloud:
-        """The placed scans in scan 0's frame as one voxel-downsampled cloud.
+        """The placed scans in scan 0's frame as one cloud.
 
         Parameters
         ----------
         clouds : list of array-like (n_k, 3) or Open3D point clouds
             The scans given to :func:`register_multiway`, in the same order.
-        voxel_size : float, default=None
-            Voxel of the merged cloud; ``None`` is half the common resolution.
+        voxel_size : float, "auto" or None, default="auto"
+            Voxel the merged cloud is downsampled to; ``"auto"`` is half the common
+            resolution, ``None`` keeps every point.
         colour : bool, default=True
-            Paint each scan in its own colour (:data:`SCAN_COLOURS`, in scan order).
+            Paint each scan in its own colour (:data:`SCAN_COLOURS`, in scan order);
+            ``False`` keeps the scans' own colours and normals (turned with them).
 
         Returns
         -------
@@ -125,12 +133,16 @@ class MultiwayResult:
         for k, (scan, pose) in enumerate(zip(clouds, self.poses, strict=True)):
             if pose is None:
                 continue
-            part = o3d.geometry.PointCloud(to_point_cloud(scan, f"clouds[{k}]").points)
-            part.transform(pose)
+            part = o3d.geometry.PointCloud(to_point_cloud(scan, f"clouds[{k}]"))
+            part.transform(pose)  # turns the normals too
             if colour:
                 part.paint_uniform_color(SCAN_COLOURS[k % len(SCAN_COLOURS)])
             merged += part
-        return merged.voxel_down_sample(voxel_size or self.voxel_size / 2)
+        if voxel_size is None:
+            return merged
+        return merged.voxel_down_sample(
+            self.voxel_size / 2 if isinstance(voxel_size, str) else float(voxel_size)
+        )
 
     def mesh(
         self, clouds: list[Any], *, voxel_size: float | None = None, depth: int = 9
@@ -145,7 +157,8 @@ class MultiwayResult:
         clouds : list
             As in :meth:`merge`.
         voxel_size : float, default=None
-            As in :meth:`merge`.
+            Voxel the scans are merged at before meshing; ``None`` is half the common
+            resolution.
         depth : int, default=9
             Octree depth of the Poisson solver (detail, and memory).
 
@@ -153,12 +166,75 @@ class MultiwayResult:
         -------
         open3d.geometry.TriangleMesh
         """
-        merged = self.merge(clouds, voxel_size=voxel_size, colour=False)
         voxel = voxel_size or self.voxel_size / 2
+        merged = self.merge(clouds, voxel_size=voxel, colour=False)
         merged.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=30))
         merged.orient_normals_consistent_tangent_plane(16)
         mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(merged, depth=depth)
         return mesh
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the poses, the candidate pairs, the edges and the optimised pose graph
+        (nodes, edges with their information matrices) to a JSON file that
+        :meth:`load` reads back. (``o3d-rpointhop reconstruct --pose-graph`` writes the
+        graph alone in Open3D's format, for ``open3d.io.read_pose_graph``.)"""
+        graph = self.pose_graph
+        body = {
+            "poses": self.poses,
+            "pairs": [[i, j, t, f] for (i, j), (t, f) in sorted(self.pairs.items())],
+            "edges": [list(e) for e in self.edges],
+            "unconnected": list(self.unconnected),
+            "voxel_size": self.voxel_size,
+            "seconds": self.seconds,
+            "pose_graph": {
+                "nodes": [np.asarray(n.pose) for n in graph.nodes],
+                "edges": [
+                    {
+                        "source": int(e.source_node_id),
+                        "target": int(e.target_node_id),
+                        "transformation": np.asarray(e.transformation),
+                        "information": np.asarray(e.information),
+                        "uncertain": bool(e.uncertain),
+                        "confidence": float(e.confidence),
+                    }
+                    for e in graph.edges
+                ],
+            },
+        }
+        write_json(path, "MultiwayResult", body)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MultiwayResult:
+        """A result :meth:`save` wrote; ValueError for any other file."""
+        body = read_json(path, "MultiwayResult")
+        try:
+            graph = reg.PoseGraph()
+            for pose in body["pose_graph"]["nodes"]:
+                graph.nodes.append(reg.PoseGraphNode(_matrix(pose, (4, 4), f"{path}")))
+            for e in body["pose_graph"]["edges"]:
+                edge = reg.PoseGraphEdge(
+                    int(e["source"]),
+                    int(e["target"]),
+                    _matrix(e["transformation"], (4, 4), f"{path}"),
+                    _matrix(e["information"], (6, 6), f"{path}"),
+                    uncertain=bool(e["uncertain"]),
+                    confidence=float(e["confidence"]),
+                )
+                graph.edges.append(edge)
+            return cls(
+                poses=[None if p is None else _matrix(p, (4, 4), f"{path}") for p in body["poses"]],
+                pose_graph=graph,
+                pairs={
+                    (int(i), int(j)): (_matrix(t, (4, 4), f"{path}"), float(f))
+                    for i, j, t, f in body["pairs"]
+                },
+                edges=[tuple(int(v) for v in e) for e in body["edges"]],
+                unconnected=[int(k) for k in body["unconnected"]],
+                voxel_size=float(body["voxel_size"]),
+                seconds=float(body["seconds"]),
+            )
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
 
     def as_dict(self, names: list[str] | None = None) -> dict:
         """JSON-ready poses, edges and flags, scans called by ``names`` (default: their

@@ -3,11 +3,58 @@
 
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-__all__ = ["RegistrationResult", "StepResult"]
+__all__ = ["RegistrationResult", "StepResult", "read_json", "write_json"]
+
+#: Format of the files :meth:`RegistrationResult.save` and ``MultiwayResult.save`` write.
+RESULT_FORMAT = 1
+
+
+def _plain(value: Any) -> Any:
+    """numpy values as JSON's own types (``json.dump``'s ``default``)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def write_json(path: str | os.PathLike, kind: str, body: dict) -> None:
+    """``body`` as a JSON file tagged with ``kind`` and :data:`RESULT_FORMAT`."""
+    text = json.dumps({"kind": kind, "format": RESULT_FORMAT, **body}, default=_plain)
+    Path(path).write_text(text)
+
+
+def read_json(path: str | os.PathLike, kind: str) -> dict:
+    """The body of a file :func:`write_json` wrote as ``kind``; ValueError otherwise."""
+    try:
+        body = json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not a saved result ({exc})") from None
+    if not isinstance(body, dict) or body.get("kind") != kind:
+        found = body.get("kind") if isinstance(body, dict) else None
+        raise ValueError(f"{path}: not a saved {kind} (found {found!r})")
+    if body.get("format") != RESULT_FORMAT:
+        raise ValueError(f"{path}: result format {body.get('format')!r}, expected {RESULT_FORMAT}")
+    return body
+
+
+def _matrix(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != shape or not np.isfinite(arr).all():
+        raise ValueError(f"{what}: expected a finite {shape} array")
+    return arr
+
+
+def _pairs(value: Any) -> np.ndarray:
+    return np.asarray(value, dtype=np.int64).reshape(-1, 2)
 
 
 @dataclass
@@ -54,6 +101,22 @@ class StepResult:
             "distance": self.distance,
             "info": self.info,
         }
+
+    def _full(self) -> dict:
+        return {**self.as_dict(), "correspondence_set": self.correspondence_set}
+
+    @classmethod
+    def _from_full(cls, body: dict) -> StepResult:
+        return cls(
+            name=str(body["name"]),
+            transformation=_matrix(body["transformation"], (4, 4), "step transformation"),
+            fitness=float(body["fitness"]),
+            inlier_rmse=float(body["inlier_rmse"]),
+            correspondence_set=_pairs(body["correspondence_set"]),
+            seconds=float(body["seconds"]),
+            info=dict(body["info"]),
+            distance=float(body["distance"]),
+        )
 
     @classmethod
     def from_open3d(
@@ -155,3 +218,33 @@ class RegistrationResult:
             "seconds": self.seconds,
             "steps": [s.as_dict() for s in self.steps],
         }
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write everything this result holds (inlier pairs and every step included) to
+        a JSON file that :meth:`load` reads back."""
+        body = {
+            **self.as_dict(),
+            "correspondence_set": self.correspondence_set,
+            "steps": [s._full() for s in self.steps],
+        }
+        write_json(path, "RegistrationResult", body)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> RegistrationResult:
+        """A result :meth:`save` wrote; ValueError for any other file."""
+        body = read_json(path, "RegistrationResult")
+        try:
+            return cls(
+                transformation=_matrix(body["transformation"], (4, 4), f"{path}"),
+                fitness=float(body["fitness"]),
+                inlier_rmse=float(body["inlier_rmse"]),
+                correspondence_set=_pairs(body["correspondence_set"]),
+                steps=[StepResult._from_full(step) for step in body["steps"]],
+                voxel_size=float(body["voxel_size"]),
+                seconds=float(body["seconds"]),
+                distance=float(body["distance"]),
+                converged=bool(body["converged"]),
+                ambiguous=bool(body["ambiguous"]),
+            )
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None

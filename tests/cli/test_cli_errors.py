@@ -115,7 +115,7 @@ def test_usage_errors_exit_2(capsys):
     "extra, message",
     [
         (["--descriptor", "fpfh", "--model", "m.npz"], "--model applies to the rpointhop"),
-        (["--init", "bad.txt"], "not 4x4"),
+        (["--init", "bad.txt"], "3 numbers, expected 4"),
         (["--model", "missing.npz"], "no such model file"),
         (["--refine", "none", "--symmetry-check"], "--symmetry-check needs an ICP"),
     ],

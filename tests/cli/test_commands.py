@@ -22,15 +22,33 @@ def test_reconstruct_command(tmp_path, capsys):
     scans, _ = partial_views(3, seed=1)
     names = []
     for k, scan in enumerate(scans):
-        np.save(tmp_path / f"s{k}.npy", scan)
-        names.append(str(tmp_path / f"s{k}.npy"))
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scan))
+        cloud.paint_uniform_color([0.1 * (k + 1), 0.5, 0.9])
+        cloud.estimate_normals()
+        o3d.io.write_point_cloud(str(tmp_path / f"s{k}.ply"), cloud)
+        names.append(str(tmp_path / f"s{k}.ply"))
     out, poses = tmp_path / "merged.ply", tmp_path / "poses.json"
     assert main(["reconstruct", *names, "-o", str(out), "--poses", str(poses)]) == EXIT_OK
     summary = json.loads(poses.read_text())
     assert summary["unconnected"] == [] and len(summary["poses"]) == 3
 
+    # Every point of every scan, with the scans' own colours and normals.
     merged = o3d.io.read_point_cloud(str(out))
-    assert len(merged.points) > 1000 and merged.has_colors()
+    assert len(merged.points) == sum(len(s) for s in scans)
+    assert merged.has_normals()
+    colours = {tuple(c) for c in np.asarray(merged.colors).round(2)}
+    assert colours == {(0.1, 0.5, 0.9), (0.2, 0.5, 0.9), (0.3, 0.5, 0.9)}
+    pose = np.array(summary["poses"][1])
+    first = len(scans[0])
+    np.testing.assert_allclose(  # scan 1's normals turned with it
+        np.asarray(merged.normals)[first : first + 5],
+        np.asarray(o3d.io.read_point_cloud(names[1]).normals)[:5] @ pose[:3, :3].T,
+        atol=1e-6,
+    )
+    args = ["--voxel-size", "0.05", "--colour-by-scan"]
+    assert main(["reconstruct", *names, "-o", str(out), *args]) == EXIT_OK
+    merged = o3d.io.read_point_cloud(str(out))
+    assert 100 < len(merged.points) < sum(len(s) for s in scans) / 2
     # Each scan's colour is there (voxels shared by two scans blend theirs).
     colours = {tuple(c) for c in np.asarray(merged.colors).round(2)}
     assert {(0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.17, 0.63, 0.17)} <= colours

@@ -1,0 +1,223 @@
+"""Pose files: KITTI, TUM and 3DMatch ``.log`` trajectories, Open3D pose graphs, and one
+4x4 matrix per text file.
+
+Every pose is a 4x4 rigid transformation that maps a scan (or a source) into a common
+frame (or the target), as everywhere in this library and in Open3D.
+
+=================  ==============================================================
+format             one record
+=================  ==============================================================
+``"kitti"``        12 numbers: the top three rows of the matrix, row by row
+``"tum"``          ``timestamp tx ty tz qx qy qz qw`` (a unit quaternion, scalar last)
+``"3dmatch"``      a line ``i j n`` and the matrix's four rows (Choi et al.'s ``.log``)
+``"matrix"``       one 4x4 matrix per file (``np.loadtxt``), what ``--init`` reads
+=================  ==============================================================
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "POSE_FORMATS",
+    "read_matrix",
+    "read_poses",
+    "read_pose_graph",
+    "write_matrix",
+    "write_pose_graph",
+    "write_poses",
+]
+
+#: What :func:`read_poses` and :func:`write_poses` read and write.
+POSE_FORMATS = ("kitti", "tum", "3dmatch")
+# Largest deviation from a rigid motion a pose file may hold (rounding of printed files).
+_RIGID_TOLERANCE = 1e-4
+
+
+def _check_pose(matrix: np.ndarray, where: str) -> np.ndarray:
+    """``matrix`` if it is a finite rigid 4x4 transformation; ValueError naming ``where``."""
+    if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+        raise ValueError(f"{where}: not a finite 4x4 matrix")
+    rot = matrix[:3, :3]
+    if (
+        np.abs(matrix[3] - [0, 0, 0, 1]).max() > _RIGID_TOLERANCE
+        or np.abs(rot @ rot.T - np.eye(3)).max() > _RIGID_TOLERANCE
+        or np.linalg.det(rot) < 0
+    ):
+        raise ValueError(f"{where}: not a rigid transformation (rotation and translation)")
+    return matrix
+
+
+def _as_poses(poses: Sequence) -> list[np.ndarray]:
+    out = []
+    for k, pose in enumerate(poses):
+        out.append(_check_pose(np.asarray(pose, dtype=np.float64), f"poses[{k}]"))
+    if not out:
+        raise ValueError("no poses to write")
+    return out
+
+
+def _rows(path: Path, width: int) -> np.ndarray:
+    """The numeric rows of a text file, each of ``width`` numbers (``#`` comments and
+    blank lines skipped); ValueError naming the first bad line."""
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        words = text.split()
+        try:
+            values = [float(w) for w in words]
+        except ValueError:
+            raise ValueError(f"{path}, line {number}: not numbers: {text[:60]!r}") from None
+        if len(values) != width:
+            raise ValueError(f"{path}, line {number}: {len(values)} numbers, expected {width}")
+        rows.append(values)
+    if not rows:
+        raise ValueError(f"{path}: no poses in this file")
+    return np.asarray(rows)
+
+
+def write_poses(
+    path: str | os.PathLike,
+    poses: Sequence,
+    format: str = "kitti",
+    *,
+    timestamps: Sequence[float] | None = None,
+    pairs: Sequence[tuple[int, int]] | None = None,
+    n_fragments: int | None = None,
+) -> None:
+    """Write poses as a trajectory file.
+
+    Parameters
+    ----------
+    path : path-like
+    poses : sequence of array-like (4, 4)
+        Rigid transformations (ValueError otherwise).
+    format : {"kitti", "tum", "3dmatch"}, default="kitti"
+    timestamps : sequence of float, default=None
+        TUM only: one per pose (default: 0, 1, 2, ...).
+    pairs : sequence of (int, int), default=None
+        3DMatch only: the ``(i, j)`` of each record, the pose mapping fragment ``j``
+        into fragment ``i`` (default: ``(0, k)``, scan ``k`` into scan 0, the frame of
+        :func:`~o3d_rpointhop.register_multiway`'s poses).
+    n_fragments : int, default=None
+        3DMatch only: the third number of every header line (default: the number of
+        poses).
+    """
+    poses = _as_poses(poses)
+    path = Path(path)
+    lines = []
+    if format == "kitti":
+        lines = [" ".join(f"{v:.9g}" for v in pose[:3].ravel()) for pose in poses]
+    elif format == "tum":
+        stamps = np.arange(len(poses), dtype=float) if timestamps is None else timestamps
+        if len(stamps) != len(poses):
+            raise ValueError(f"{len(stamps)} timestamps for {len(poses)} poses")
+        for stamp, pose in zip(stamps, poses, strict=True):
+            quat = Rotation.from_matrix(pose[:3, :3]).as_quat()  # x, y, z, w
+            values = [float(stamp), *pose[:3, 3], *quat]
+            lines.append(" ".join(f"{v:.9g}" for v in values))
+    elif format == "3dmatch":
+        ids = [(0, k) for k in range(len(poses))] if pairs is None else list(pairs)
+        if len(ids) != len(poses):
+            raise ValueError(f"{len(ids)} pairs for {len(poses)} poses")
+        total = len(poses) if n_fragments is None else int(n_fragments)
+        for (i, j), pose in zip(ids, poses, strict=True):
+            lines.append(f"{int(i)} {int(j)} {total}")
+            lines += [" ".join(f"{v:.9g}" for v in row) for row in pose]
+    else:
+        raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def read_poses(
+    path: str | os.PathLike, format: str = "kitti"
+) -> list[np.ndarray] | dict[tuple[int, int], np.ndarray]:
+    """Read a trajectory file :func:`write_poses` (or KITTI, TUM, 3DMatch) wrote.
+
+    Returns
+    -------
+    list of ndarray (4, 4), or dict
+        KITTI and TUM: the poses in file order (TUM's timestamps are dropped; read
+        the first column with ``np.loadtxt`` for them). 3DMatch: ``{(i, j): pose}``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    if format == "kitti":
+        rows = _rows(path, 12)
+        poses = [np.vstack([r.reshape(3, 4), [0, 0, 0, 1]]) for r in rows]
+    elif format == "tum":
+        rows = _rows(path, 8)
+        norms = np.linalg.norm(rows[:, 4:], axis=1)
+        if (np.abs(norms - 1) > 1e-3).any():
+            raise ValueError(f"{path}: a quaternion is not of unit length")
+        poses = []
+        for r in rows:
+            pose = np.eye(4)
+            pose[:3, :3] = Rotation.from_quat(r[4:]).as_matrix()
+            pose[:3, 3] = r[1:4]
+            poses.append(pose)
+    elif format == "3dmatch":
+        lines = [ln.split() for ln in path.read_text().splitlines() if ln.strip()]
+        if not lines or len(lines) % 5:
+            raise ValueError(f"{path}: expected records of 5 lines, got {len(lines)} lines")
+        out = {}
+        for k in range(0, len(lines), 5):
+            try:
+                i, j = int(lines[k][0]), int(lines[k][1])
+                pose = np.array([[float(v) for v in row] for row in lines[k + 1 : k + 5]])
+            except (ValueError, IndexError):
+                raise ValueError(f"{path}, record {k // 5}: not a pose record") from None
+            out[(i, j)] = _check_pose(pose, f"{path}, record {k // 5}")
+        return out
+    else:
+        raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
+    return [_check_pose(p, f"{path}, pose {k}") for k, p in enumerate(poses)]
+
+
+def read_matrix(path: str | os.PathLike) -> np.ndarray:
+    """One rigid 4x4 matrix from a text file (four rows of four numbers)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    rows = _rows(path, 4)
+    return _check_pose(rows, str(path))
+
+
+def write_matrix(path: str | os.PathLike, matrix) -> None:
+    """One 4x4 matrix as four rows of text (what :func:`read_matrix` and ``--init``
+    read)."""
+    matrix = _check_pose(np.asarray(matrix, dtype=np.float64), "matrix")
+    np.savetxt(path, matrix, fmt="%.12g")
+
+
+def write_pose_graph(path: str | os.PathLike, pose_graph) -> None:
+    """An Open3D ``PoseGraph`` in Open3D's JSON format (``open3d.io.read_pose_graph``
+    reads it)."""
+    import open3d as o3d
+
+    if Path(path).suffix.lower() != ".json":
+        raise ValueError(f"{path}: Open3D writes pose graphs as .json files")
+    o3d.io.write_pose_graph(str(path), pose_graph)  # returns nothing in Open3D 0.19+
+    if not Path(path).is_file():
+        raise OSError(f"Open3D could not write {path}")
+
+
+def read_pose_graph(path: str | os.PathLike):
+    """An Open3D ``PoseGraph`` from Open3D's JSON format."""
+    import open3d as o3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    graph = o3d.io.read_pose_graph(str(path))
+    if len(graph.nodes) == 0:
+        raise ValueError(f"{path}: no pose graph nodes (not an Open3D pose graph file)")
+    return graph

@@ -1,0 +1,138 @@
+"""Survey, driving and mesh files: LAS/LAZ, E57, KITTI .bin and triangle meshes."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.io import READ_FORMATS, read_cloud
+
+laspy = pytest.importorskip("laspy")
+
+# Survey coordinates: offsets of hundreds of kilometres, millimetre resolution.
+OFFSET = np.array([512_345.0, 5_412_678.0, 312.0])
+
+
+def _las(path, points, rgb=None, point_format=3):
+    header = laspy.LasHeader(point_format=point_format, version="1.2")
+    header.offsets = OFFSET
+    header.scales = np.array([0.001, 0.001, 0.001])
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    if rgb is not None:
+        las.red, las.green, las.blue = rgb.T
+    las.write(str(path))
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_las_keeps_survey_coordinates_to_the_millimetre_and_the_colours(tmp_path, suffix):
+    rng = np.random.default_rng(0)
+    points = OFFSET + np.round(rng.uniform(0, 50, (500, 3)), 3)
+    rgb = rng.integers(0, 65536, (500, 3), dtype=np.uint16)
+    _las(tmp_path / f"a{suffix}", points, rgb)
+    cloud = read_cloud(tmp_path / f"a{suffix}")
+    np.testing.assert_allclose(np.asarray(cloud.points), points, atol=5e-4, rtol=0)
+    np.testing.assert_allclose(np.asarray(cloud.colors), rgb / 65535.0, atol=1e-12)
+    _las(tmp_path / "plain.las", points, point_format=0)  # a format without colours
+    assert not read_cloud(tmp_path / "plain.las").has_colors()
+
+
+def test_a_truncated_las_file_gets_one_clear_line(tmp_path):
+    points = OFFSET + np.random.default_rng(1).uniform(0, 5, (300, 3))
+    _las(tmp_path / "a.las", points)
+    data = (tmp_path / "a.las").read_bytes()
+    (tmp_path / "cut.las").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match=r"cut.las: damaged or unreadable \.las file"):
+        read_cloud(tmp_path / "cut.las")
+
+
+def test_a_missing_reader_names_the_install_line(tmp_path, monkeypatch):
+    (tmp_path / "a.las").write_bytes(b"LASF" + b"\0" * 400)
+    monkeypatch.setitem(sys.modules, "laspy", None)  # as if not installed
+    with pytest.raises(ImportError, match=r"pip install '\.\[las\]'"):
+        read_cloud(tmp_path / "a.las")
+
+
+def test_e57_reads_every_scan_placed_by_its_pose(tmp_path):
+    pye57 = pytest.importorskip("pye57")
+    rng = np.random.default_rng(2)
+    first, second = rng.uniform(-1, 1, (200, 3)), rng.uniform(-1, 1, (150, 3))
+    shift = np.array([10.0, -4.0, 2.5])
+    with pye57.E57(str(tmp_path / "a.e57"), mode="w") as e57:
+        for part, move in ((first, np.zeros(3)), (second, shift)):
+            fields = {
+                "cartesianX": part[:, 0],
+                "cartesianY": part[:, 1],
+                "cartesianZ": part[:, 2],
+                "colorRed": np.full(len(part), 255, np.uint8),
+                "colorGreen": np.zeros(len(part), np.uint8),
+                "colorBlue": np.full(len(part), 51, np.uint8),
+            }
+            e57.write_scan_raw(fields, translation=move)
+    cloud = read_cloud(tmp_path / "a.e57")
+    np.testing.assert_allclose(
+        np.asarray(cloud.points), np.concatenate([first, second + shift]), atol=1e-9
+    )
+    np.testing.assert_allclose(np.asarray(cloud.colors)[0], [1.0, 0.0, 0.2])
+    (tmp_path / "bad.e57").write_bytes(b"ASTM-E57" + b"\1" * 2000)
+    with pytest.raises(ValueError, match=r"bad.e57: damaged or unreadable \.e57 file"):
+        read_cloud(tmp_path / "bad.e57")
+
+
+def test_kitti_sweeps_are_read_and_partial_records_refused(tmp_path):
+    rng = np.random.default_rng(3)
+    records = rng.uniform(-40, 40, (1000, 4)).astype("<f4")
+    records.tofile(tmp_path / "000000.bin")
+    cloud = read_cloud(tmp_path / "000000.bin")
+    np.testing.assert_array_equal(np.asarray(cloud.points), records[:, :3].astype(np.float64))
+    (tmp_path / "cut.bin").write_bytes(records.tobytes()[:-6])
+    with pytest.raises(ValueError, match="not a whole number of 16-byte"):
+        read_cloud(tmp_path / "cut.bin")
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".off", ".gltf"])
+def test_meshes_are_sampled_by_area_with_their_normals(tmp_path, suffix):
+    # A 4 x 1 x 1 box: its long faces hold 16 / 18 of the area.
+    mesh = o3d.geometry.TriangleMesh.create_box(4.0, 1.0, 1.0)
+    mesh.compute_triangle_normals()
+    assert o3d.io.write_triangle_mesh(str(tmp_path / f"box{suffix}"), mesh)
+    cloud = read_cloud(tmp_path / f"box{suffix}", mesh_points=9000)
+    points, normals = np.asarray(cloud.points), np.asarray(cloud.normals)
+    assert points.shape == (9000, 3)
+    assert points.min(axis=0) == pytest.approx([0, 0, 0], abs=1e-9)
+    assert points.max(axis=0) == pytest.approx([4, 1, 1], abs=1e-9)
+    on_end = (np.abs(normals[:, 0]) > 0.99).mean()  # the two 1 x 1 end faces
+    assert on_end == pytest.approx(2 / 18, abs=0.02)
+    on_face = np.isclose(points, 0).any(axis=1) | np.isclose(points, [4, 1, 1]).any(axis=1)
+    assert on_face.all()  # every sample lies on the surface
+    again = read_cloud(tmp_path / f"box{suffix}", mesh_points=9000)
+    np.testing.assert_array_equal(np.asarray(again.points), points)  # seeded
+
+
+def test_meshes_and_unknown_formats_are_checked(tmp_path):
+    (tmp_path / "empty.obj").write_text("# nothing here\n")
+    with pytest.raises(ValueError, match="no vertices"):
+        read_cloud(tmp_path / "empty.obj")
+    mesh = o3d.geometry.TriangleMesh.create_box()
+    o3d.io.write_triangle_mesh(str(tmp_path / "box.obj"), mesh)
+    with pytest.raises(ValueError, match="mesh_points"):
+        read_cloud(tmp_path / "box.obj", mesh_points=0)
+    (tmp_path / "a.dxf").write_text("0\nSECTION\n")
+    with pytest.raises(ValueError, match=r"unknown point cloud format '\.dxf'.*\.las.*\.e57"):
+        read_cloud(tmp_path / "a.dxf")
+    assert {".laz", ".e57", ".bin", ".obj", ".stl", ".ply", ".npy"} <= set(READ_FORMATS)
+
+
+def test_read_points_register(tmp_path):
+    """A cloud read from LAS survey coordinates registers like the same points do."""
+    from o3d_rpointhop import register
+
+    points = make_object(1200, shape_seed=4) * 10 + OFFSET
+    _las(tmp_path / "t.las", points)
+    cloud = read_cloud(tmp_path / "t.las")
+    result = register(cloud, cloud, global_method=None)
+    np.testing.assert_allclose(result.transformation, np.eye(4), atol=1e-6)

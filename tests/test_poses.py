@@ -1,0 +1,214 @@
+"""Pose files (KITTI, TUM, 3DMatch .log, Open3D pose graphs), saved results, and scoring
+a transformation obtained elsewhere."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import open3d as o3d
+import pytest
+from helpers import motion_matrix, partial_views, random_motion
+
+from o3d_rpointhop import RegistrationResult, evaluate, register, register_multiway
+from o3d_rpointhop.cli import EXIT_ERROR, EXIT_OK, EXIT_UNRELIABLE, main
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.datasets.threedmatch import read_gt_log
+from o3d_rpointhop.poses import (
+    read_matrix,
+    read_pose_graph,
+    read_poses,
+    write_matrix,
+    write_pose_graph,
+    write_poses,
+)
+from o3d_rpointhop.registration import MultiwayResult
+
+POSES = [motion_matrix(*random_motion(seed, 3.0)) for seed in range(4)]
+
+
+@pytest.mark.parametrize("fmt", ["kitti", "tum"])
+def test_trajectories_round_trip(tmp_path, fmt):
+    write_poses(tmp_path / "t.txt", POSES, fmt)
+    back = read_poses(tmp_path / "t.txt", fmt)
+    assert len(back) == 4
+    for a, b in zip(POSES, back, strict=True):
+        np.testing.assert_allclose(b, a, atol=1e-8)
+
+
+def test_formats_hold_the_published_layouts(tmp_path):
+    pose = np.eye(4)
+    pose[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # 90 deg about z
+    pose[:3, 3] = [1.0, 2.0, 3.0]
+    write_poses(tmp_path / "k.txt", [pose], "kitti")
+    assert np.loadtxt(tmp_path / "k.txt").tolist() == [0, -1, 0, 1, 1, 0, 0, 2, 0, 0, 1, 3]
+    write_poses(tmp_path / "t.txt", [pose], "tum", timestamps=[12.5])
+    stamp, *xyz, qx, qy, qz, qw = np.loadtxt(tmp_path / "t.txt")
+    assert stamp == 12.5 and xyz == [1, 2, 3]
+    np.testing.assert_allclose([qx, qy, qz, qw], [0, 0, np.sqrt(0.5), np.sqrt(0.5)])
+    write_poses(tmp_path / "a.log", [pose], "3dmatch", pairs=[(3, 7)], n_fragments=60)
+    assert (tmp_path / "a.log").read_text().splitlines()[0] == "3 7 60"
+    # The benchmark's own gt.log reader reads what is written.
+    np.testing.assert_allclose(read_gt_log(tmp_path / "a.log")[(3, 7)], pose)
+    np.testing.assert_allclose(read_poses(tmp_path / "a.log", "3dmatch")[(3, 7)], pose)
+
+
+def test_bad_pose_files_and_poses_are_refused(tmp_path):
+    (tmp_path / "short.txt").write_text("1 0 0 0 0 1 0 0 0 0 1\n")
+    with pytest.raises(ValueError, match="line 1: 11 numbers, expected 12"):
+        read_poses(tmp_path / "short.txt", "kitti")
+    (tmp_path / "words.txt").write_text("# a comment\n1 0 0 x 0 1 0 0 0 0 1 0\n")
+    with pytest.raises(ValueError, match="line 2: not numbers"):
+        read_poses(tmp_path / "words.txt", "kitti")
+    (tmp_path / "quat.txt").write_text("0 1 2 3 0 0 0 2\n")
+    with pytest.raises(ValueError, match="unit length"):
+        read_poses(tmp_path / "quat.txt", "tum")
+    scaled = np.diag([2.0, 2.0, 2.0, 1.0])
+    with pytest.raises(ValueError, match=r"poses\[0\]: not a rigid"):
+        write_poses(tmp_path / "s.txt", [scaled])
+    mirror = np.diag([1.0, 1.0, -1.0, 1.0])
+    with pytest.raises(ValueError, match="not a rigid"):
+        write_matrix(tmp_path / "m.txt", mirror)
+    with pytest.raises(ValueError, match="format must be one of"):
+        write_poses(tmp_path / "x.txt", POSES, "g2o")
+    with pytest.raises(FileNotFoundError):
+        read_matrix(tmp_path / "missing.txt")
+    write_matrix(tmp_path / "m.txt", POSES[1])
+    np.testing.assert_allclose(read_matrix(tmp_path / "m.txt"), POSES[1], atol=1e-10)
+
+
+@pytest.fixture(scope="module")
+def multiway():
+    scans, _ = partial_views(3, seed=1)
+    return scans, register_multiway(scans, seed=0)
+
+
+def test_multiway_results_and_pose_graphs_round_trip(tmp_path, multiway):
+    scans, result = multiway
+    result.save(tmp_path / "r.json")
+    back = MultiwayResult.load(tmp_path / "r.json")
+    for a, b in zip(result.poses, back.poses, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert back.edges == result.edges and back.unconnected == result.unconnected
+    assert back.pairs.keys() == result.pairs.keys()
+    assert len(back.pose_graph.edges) == len(result.pose_graph.edges)
+    np.testing.assert_array_equal(
+        back.pose_graph.edges[0].information, result.pose_graph.edges[0].information
+    )
+    np.testing.assert_allclose(  # the loaded result merges like the original
+        np.asarray(back.merge(scans).points), np.asarray(result.merge(scans).points)
+    )
+    write_pose_graph(tmp_path / "g.json", result.pose_graph)
+    graph = o3d.io.read_pose_graph(str(tmp_path / "g.json"))
+    assert len(graph.nodes) == len(result.pose_graph.nodes)
+    np.testing.assert_allclose(
+        read_pose_graph(tmp_path / "g.json").nodes[1].pose, graph.nodes[1].pose
+    )
+    with pytest.raises(ValueError, match="not a saved RegistrationResult"):
+        RegistrationResult.load(tmp_path / "r.json")
+
+
+def test_registration_results_round_trip(tmp_path):
+    target = make_object(1500, shape_seed=5, sample_seed=1)
+    rot, shift = random_motion(2, 0.2)
+    result = register(make_object(1500, shape_seed=5, sample_seed=2) @ rot.T + shift, target)
+    result.save(tmp_path / "r.json")
+    back = RegistrationResult.load(tmp_path / "r.json")
+    np.testing.assert_array_equal(back.transformation, result.transformation)
+    np.testing.assert_array_equal(back.correspondence_set, result.correspondence_set)
+    assert [s.name for s in back.steps] == [s.name for s in result.steps]
+    np.testing.assert_array_equal(
+        back.steps[0].correspondence_set, result.steps[0].correspondence_set
+    )
+    assert back.steps[0].info == json.loads(json.dumps(result.steps[0].info))
+    assert (back.fitness, back.converged, back.ambiguous) == (
+        result.fitness,
+        result.converged,
+        result.ambiguous,
+    )
+    (tmp_path / "bad.json").write_text('{"kind": "RegistrationResult", "format": 1}')
+    with pytest.raises(ValueError, match="damaged saved result"):
+        RegistrationResult.load(tmp_path / "bad.json")
+    (tmp_path / "text.json").write_text("not json")
+    with pytest.raises(ValueError, match="not a saved result"):
+        RegistrationResult.load(tmp_path / "text.json")
+
+
+def test_evaluate_scores_a_given_transformation_like_open3d():
+    target = make_object(2000, shape_seed=3, sample_seed=1)
+    rot, shift = random_motion(6, 0.5)
+    truth = np.linalg.inv(motion_matrix(rot, shift))
+    source = make_object(2000, shape_seed=3, sample_seed=2) @ rot.T + shift
+    good = evaluate(source, target, truth, distance=0.02)
+    peer = o3d.pipelines.registration.evaluate_registration(
+        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source)),
+        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target)),
+        0.02,
+        truth,
+    )
+    assert good.fitness == pytest.approx(peer.fitness, abs=1e-12)
+    assert good.inlier_rmse == pytest.approx(peer.inlier_rmse, rel=1e-9)
+    assert len(good.correspondence_set) == len(peer.correspondence_set)
+    assert good.converged and good.steps[0].name == "evaluate"
+    far = motion_matrix(np.eye(3), np.array([5.0, 0.0, 0.0])) @ truth
+    bad = evaluate(source, target, far)
+    assert bad.fitness == 0.0 and not bad.converged
+    with pytest.raises(ValueError, match="distance must be a positive number"):
+        evaluate(source, target, truth, distance=-1.0)
+    with pytest.raises(ValueError, match="4x4"):
+        evaluate(source, target, np.eye(3))
+
+
+def test_evaluate_and_pose_outputs_from_the_command_line(tmp_path, capsys, multiway):
+    target = make_object(1500, shape_seed=8, sample_seed=1)
+    rot, shift = random_motion(3, 0.4)
+    source = make_object(1500, shape_seed=8, sample_seed=2) @ rot.T + shift
+    np.save(tmp_path / "s.npy", source)
+    np.save(tmp_path / "t.npy", target)
+    truth = np.linalg.inv(motion_matrix(rot, shift))
+    write_matrix(tmp_path / "truth.txt", truth)
+    off = truth.copy()
+    off[0, 3] += 0.01
+    write_matrix(tmp_path / "off.txt", off)
+    args = ["evaluate", str(tmp_path / "s.npy"), str(tmp_path / "t.npy")]
+    assert (
+        main(
+            [
+                *args,
+                "--transform",
+                str(tmp_path / "off.txt"),
+                "--truth",
+                str(tmp_path / "truth.txt"),
+                "--json",
+            ]
+        )
+        == EXIT_OK
+    )
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["translation_error"] == pytest.approx(0.01, abs=1e-9)
+    assert summary["rotation_error_deg"] == pytest.approx(0.0, abs=1e-3)  # arccos near 1
+    assert summary["converged"] and summary["fitness"] > 0.5
+    write_matrix(tmp_path / "far.txt", motion_matrix(np.eye(3), np.array([9.0, 0, 0])))
+    assert main([*args, "--transform", str(tmp_path / "far.txt")]) == EXIT_UNRELIABLE
+    (tmp_path / "bad.txt").write_text("1 2 3\n")
+    assert main([*args, "--transform", str(tmp_path / "bad.txt")]) == EXIT_ERROR
+    assert "3 numbers, expected 4" in capsys.readouterr().err
+
+    scans, _ = multiway
+    names = []
+    for k, scan in enumerate(scans):
+        np.save(tmp_path / f"v{k}.npy", scan)
+        names.append(str(tmp_path / f"v{k}.npy"))
+    outputs = {
+        "--pose-graph": tmp_path / "g.json",
+        "--trajectory": tmp_path / "traj.txt",
+        "--result": tmp_path / "multi.json",
+    }
+    flat = [str(v) for item in outputs.items() for v in item]
+    command = ["reconstruct", *names, "-o", str(tmp_path / "m.ply"), *flat]
+    assert main([*command, "--trajectory-format", "tum"]) == EXIT_OK
+    saved = MultiwayResult.load(tmp_path / "multi.json")
+    trajectory = read_poses(tmp_path / "traj.txt", "tum")
+    for pose, written in zip(saved.poses, trajectory, strict=True):
+        np.testing.assert_allclose(written, pose, atol=1e-7)
+    assert len(read_pose_graph(tmp_path / "g.json").nodes) == 3
