@@ -111,8 +111,26 @@ def add_data(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", help="data folder (default: data_home(), docs/datasets.md)")
 
 
-def add_seed(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seed", type=int, default=0, help="seeds every random choice")
+def add_seed(parser: argparse.ArgumentParser, default: int | None = 0) -> None:
+    parser.add_argument(
+        "--seed", type=int, default=default, help="seeds every random choice (default: 0)"
+    )
+
+
+def add_config(parser: argparse.ArgumentParser) -> None:
+    """``--config FILE`` and ``--set section.parameter=value``."""
+    parser.add_argument(
+        "--config",
+        help="TOML file: one section per step and [settings], keys are the library's "
+        "parameter names ('o3d-rpointhop config' prints every default); flags win over it",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="SECTION.PARAMETER=VALUE",
+        help="one setting, e.g. ransac.max_iteration=100000 or settings.icp_factors=[2.0,0.5] "
+        "(repeatable; wins over --config)",
+    )
 
 
 def add_json(parser: argparse.ArgumentParser) -> None:
@@ -145,7 +163,12 @@ def descriptor_of(args: argparse.Namespace):
         if getattr(args, "model", None):
             raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
         return FPFHTransformer()
-    return load_model(args.model) if getattr(args, "model", None) else None
+    name = getattr(args, "model", None)
+    if name == "modelnet40":  # what the default runs under that name: 128 axes
+        from ..registration.defaults import default_descriptor
+
+        return default_descriptor()
+    return load_model(name) if name else None
 
 
 def flag_status(result) -> int:

@@ -11,6 +11,7 @@ import numpy as np
 
 from ._common import (
     CommandError,
+    add_config,
     add_descriptor,
     add_json,
     add_model,
@@ -20,6 +21,7 @@ from ._common import (
     descriptor_of,
     flag_status,
 )
+from ._config import load_config, registration_options
 
 _voxel = auto_or(float, "a number", lambda v: v > 0, "voxel size must be positive")
 _global_points = auto_or(int, "a count", lambda v: v >= 3, "need at least 3 global points")
@@ -43,7 +45,6 @@ def add_parser(commands) -> None:
         "--global",
         dest="global_method",
         choices=["auto", *GLOBAL_METHODS, "none"],
-        default="auto",
         help="global estimate (default: auto, the step that won on the descriptor's "
         "training data: consensus for --model scene, else ransac; with --descriptor fpfh "
         "on indoor scans, consensus wins)",
@@ -52,26 +53,32 @@ def add_parser(commands) -> None:
     p.add_argument(
         "--refine",
         choices=[*refinements, "none"],
-        default="point_to_plane",
         help="ICP refinement (default: point_to_plane)",
     )
     p.add_argument(
         "--symmetry-check",
         action="store_true",
+        default=None,
         help="after ICP, also try the estimate's 180-degree twins and keep the best fit "
         "(objects seen whole; see docs/registration.md)",
     )
-    p.add_argument("--voxel-size", type=_voxel, default="auto", help="'auto' or a length")
+    p.add_argument("--voxel-size", type=_voxel, help="'auto' (the default) or a length")
     p.add_argument(
         "--n-global-points",
         type=_global_points,
-        default="auto",
         help="points per cloud for the global step: a count, or 'auto' (what the model "
         "states: 4096 for --model scene; else 2048)",
     )
     p.add_argument("--init", help="text file with a 4x4 start transformation (for ICP alone)")
     add_viewpoints(p, "cloud (source first)")
-    add_seed(p)
+    p.add_argument(
+        "--up",
+        type=_vector,
+        help="an up direction both clouds share, 'x,y,z' (LiDAR: 0,0,1): the global step "
+        "rejects upside-down hypotheses (default: none)",
+    )
+    add_seed(p, default=None)
+    add_config(p)
     p.add_argument("-o", "--output", help="write the aligned source cloud here")
     p.add_argument("--transform", help="write the transformation here (.txt: 4x4; .json: all)")
     p.add_argument(
@@ -83,13 +90,14 @@ def add_parser(commands) -> None:
     p.set_defaults(func=run)
 
 
-def _refine_chain(args: argparse.Namespace) -> list[str]:
-    chain = [] if args.refine == "none" else [args.refine]
-    if args.symmetry_check:
-        if not chain:
-            raise CommandError("--symmetry-check needs an ICP refinement (--refine)")
-        chain.append("symmetry_check")
-    return chain
+def _vector(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected 'x,y,z', got {text!r}")
+    return values
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,6 +112,16 @@ def run(args: argparse.Namespace) -> int:
             check_output_path(out)
     descriptor = descriptor_of(args)
     init = read_matrix(args.init) if args.init else None
+    flags = {
+        "global_method": args.global_method,
+        "refine": args.refine,
+        "voxel_size": args.voxel_size,
+        "n_global_points": args.n_global_points,
+        "seed": args.seed,
+        "symmetry_check": args.symmetry_check,
+    }
+    config = load_config(args.config, args.set)
+    options = registration_options(config, flags, descriptor)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RegistrationWarning)  # reported below, once
@@ -111,13 +129,10 @@ def run(args: argparse.Namespace) -> int:
                 source,
                 target,
                 descriptor,
-                global_method=None if args.global_method == "none" else args.global_method,
-                refine=_refine_chain(args),
-                voxel_size=args.voxel_size,
-                n_global_points=args.n_global_points,
                 init=init,
-                seed=args.seed,
                 viewpoints=args.viewpoints,
+                up=args.up,
+                **options,
             )
     except ValueError as exc:  # name the files, not just "source" and "target"
         raise CommandError(f"{exc} (source: {args.source}, target: {args.target})") from exc

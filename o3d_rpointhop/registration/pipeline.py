@@ -482,6 +482,9 @@ def register(
         steps.append(("global", _make_step(global_method, GLOBAL_METHODS)))
     previous = None
     for i, spec in enumerate(_check_refinements(refine)):
+        if isinstance(spec, SymmetryCheck):
+            steps.append(("symmetry_check", spec))
+            continue
         if spec == "symmetry_check":  # twins are refined like the estimate was
             step = SymmetryCheck(refine=None if previous is None else clone(previous))
             steps.append(("symmetry_check", step))
