@@ -42,9 +42,6 @@ def repeatable_open3d() -> Iterator[None]:
     differences). One thread costs about 10 % on RANSAC and ICP over 40k points takes
     50 ms instead of 30 ms.
     """
-    if not hasattr(o3d.utility, "set_max_threads"):  # Open3D < 0.20: no thread control
-        yield
-        return
     previous = o3d.utility.get_max_threads()
     o3d.utility.set_max_threads(1)
     try:

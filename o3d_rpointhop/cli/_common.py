@@ -108,7 +108,11 @@ def add_viewpoints(parser: argparse.ArgumentParser, clouds: str) -> None:
 
 
 def add_data(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--data", help="data folder (default: data_home(), docs/datasets.md)")
+    parser.add_argument(
+        "--data",
+        help="data folder (default: $O3D_RPOINTHOP_DATA, else ~/o3d_rpointhop_data, else "
+        "../shared/data beside the checkout)",
+    )
 
 
 def add_seed(parser: argparse.ArgumentParser, default: int | None = 0) -> None:

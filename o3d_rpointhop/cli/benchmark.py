@@ -27,8 +27,8 @@ def add_parser(commands) -> None:
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
     p.add_argument(
         "--methods",
-        help="comma-separated methods (default: the dataset's own set, listed in "
-        "docs/benchmarks.md)",
+        help="comma-separated methods (default: the dataset's own set; "
+        "o3d_rpointhop.evaluation.methods.METHODS lists every one)",
     )
     add_data(p)
     p.add_argument("--output", default="benchmark_results", help="where results go")

@@ -60,7 +60,7 @@ def add_parser(commands) -> None:
         action="store_true",
         default=None,
         help="after ICP, also try the estimate's 180-degree twins and keep the best fit "
-        "(objects seen whole; see docs/registration.md)",
+        "(for objects seen whole)",
     )
     p.add_argument("--voxel-size", type=_voxel, help="'auto' (the default) or a length")
     p.add_argument(

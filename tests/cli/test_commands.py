@@ -120,12 +120,12 @@ def test_demo_without_matplotlib_registers_and_says_why_there_is_no_picture(
     import o3d_rpointhop.plotting as plotting
 
     def missing():
-        raise ImportError("pictures need matplotlib: pip install 'o3d-rpointhop[plot]'")
+        raise ImportError("pictures need matplotlib: pip install '.[plot]' in the project folder")
 
     monkeypatch.setattr(plotting, "require_matplotlib", missing)
     assert main(["demo", "--synthetic", "--output-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "no picture: pictures need matplotlib: pip install 'o3d-rpointhop[plot]'" in out
+    assert "no picture: pictures need matplotlib: pip install '.[plot]' in the project folder" in out
     assert (tmp_path / "transform.txt").is_file() and not (tmp_path / "before_after.png").exists()
 
 
