@@ -20,7 +20,9 @@ def require_matplotlib():
     try:
         from matplotlib.figure import Figure
     except ImportError as exc:
-        raise ImportError("pictures need matplotlib: pip install '.[plot]' in the project folder") from exc
+        raise ImportError(
+            "pictures need matplotlib: pip install '.[plot]' in the project folder"
+        ) from exc
     return Figure
 
 

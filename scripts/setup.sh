@@ -24,6 +24,15 @@ if [ -n "$missing" ] && command -v apt-get >/dev/null 2>&1; then
         libusb-1.0-0 libgl1 libegl1 libgomp1 libx11-6 python3-venv >/dev/null
 fi
 
+# The viewer's browser tests drive Debian's Chromium (playwright, no browser download).
+if ! command -v chromium >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
+    SUDO=""
+    [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    echo "setup: installing chromium for the viewer's browser tests"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
+fi
+
 if [ ! -x .venv/bin/python ]; then
     echo "setup: creating .venv"
     "$PYTHON" -m venv .venv
@@ -32,12 +41,12 @@ fi
 stamp=.venv/.o3d-rpointhop-installed
 want=$(cksum pyproject.toml | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "setup: installing o3d-rpointhop and its test, plot, distributed, survey-file and HDF5 extras"
+    echo "setup: installing o3d-rpointhop and its test, plot, distributed, survey-file, HDF5 and viewer extras"
     # pip's notices go to a log, shown only if the install fails.
     log=.venv/pip-install.log
     if ! { .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip &&
         .venv/bin/python -m pip install -q --disable-pip-version-check \
-            -e ".[test,plot,distributed,las,e57,h5]"; } > "$log" 2>&1; then
+            -e ".[test,plot,distributed,las,e57,h5,view]"; } > "$log" 2>&1; then
         cat "$log" >&2
         echo "setup: pip install failed (log above, also in $log)" >&2
         exit 1

@@ -34,6 +34,7 @@ LAYERS = {
     f"{TOP}.descriptors": 2,
     f"{TOP}.registration": 3,
     f"{TOP}.batch": 4,
+    f"{TOP}.viewer": 4,
     f"{TOP}.evaluation": 4,
     f"{TOP}.cli": 4,
 }

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import benchmark, config, demo, describe, evaluate, fit, reconstruct, register
+from . import benchmark, config, demo, describe, evaluate, fit, reconstruct, register, view
 from ._common import (
     EXIT_CODES,
     EXIT_ERROR,
@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 #: The commands, in the order ``--help`` lists them.
-COMMANDS = (demo, register, evaluate, config, benchmark, reconstruct, fit, describe)
+COMMANDS = (demo, register, evaluate, view, config, benchmark, reconstruct, fit, describe)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -18,6 +18,7 @@ from ._common import (
     add_viewpoints,
     descriptor_of,
 )
+from .view import add_view
 
 
 def add_parser(commands) -> None:
@@ -62,6 +63,7 @@ def add_parser(commands) -> None:
     p.add_argument("--n-jobs", type=int, help="parallel pair registrations")
     add_viewpoints(p, "scan")
     add_seed(p)
+    add_view(p)
     p.set_defaults(func=run)
 
 
@@ -116,5 +118,8 @@ def run(args: argparse.Namespace) -> int:
     if result.unconnected:
         names = ", ".join(summary["unconnected"])
         print(f"{PROG}: warning: unconnected (left out): {names}", file=sys.stderr)
-        return EXIT_UNRELIABLE
-    return EXIT_OK
+    if args.view:
+        from ..viewer import show_multiway
+
+        show_multiway(scans, result, host=args.host, port=args.port)
+    return EXIT_UNRELIABLE if result.unconnected else EXIT_OK

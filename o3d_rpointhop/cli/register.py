@@ -22,6 +22,7 @@ from ._common import (
     flag_status,
 )
 from ._config import load_config, registration_options
+from .view import add_view
 
 _voxel = auto_or(float, "a number", lambda v: v > 0, "voxel size must be positive")
 _global_points = auto_or(int, "a count", lambda v: v >= 3, "need at least 3 global points")
@@ -87,6 +88,7 @@ def add_parser(commands) -> None:
         "RegistrationResult.load reads it back",
     )
     add_json(p)
+    add_view(p)
     p.set_defaults(func=run)
 
 
@@ -139,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     summary = result.as_dict()
     summary.update({"source": args.source, "target": args.target})
     if args.output:
-        aligned = source.transform(result.transformation)  # source is our own copy
+        aligned = type(source)(source).transform(result.transformation)  # a copy
         write_cloud(args.output, aligned)
         summary["aligned_cloud"] = args.output
     if args.transform:
@@ -160,4 +162,9 @@ def run(args: argparse.Namespace) -> int:
             f"fitness {result.fitness:.3f}, inlier RMSE {result.inlier_rmse:.6g}, "
             f"voxel {result.voxel_size:.6g} ({steps})"
         )
-    return flag_status(result)
+    status = flag_status(result)
+    if args.view:
+        from ..viewer import show_registration
+
+        show_registration(source, target, result, host=args.host, port=args.port)
+    return status

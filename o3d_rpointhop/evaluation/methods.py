@@ -479,7 +479,8 @@ def check_methods(methods, dataset: str) -> list[str]:
         raise ValueError(f"{elsewhere} do not apply to {dataset} (only to {', '.join(where)})")
     if "kiss-matcher" in methods and not kiss_matcher_available():
         print(
-            "benchmark: kiss-matcher skipped: not installed (pip install '.[peers]' in the project folder)",
+            "benchmark: kiss-matcher skipped: not installed "
+            "(pip install '.[peers]' in the project folder)",
             file=sys.stderr,
         )
         methods.remove("kiss-matcher")
@@ -541,7 +542,8 @@ def run_method(
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
     if name == "kiss-matcher" and not kiss_matcher_available():
         raise ValueError(
-            "kiss-matcher is not installed: pip install '.[peers]' in the project folder (or kiss-matcher)"
+            "kiss-matcher is not installed: pip install '.[peers]' in the project folder "
+            "(or kiss-matcher)"
         )
     method = METHODS[name]
     # Loading a model file is not part of a method's time.

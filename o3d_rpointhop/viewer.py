@@ -1,0 +1,270 @@
+"""Registrations and reconstructions in the browser: an interactive 3D page served by
+viser (its client ships in its wheel and needs no network), for a remote machine or a
+notebook as well as a desktop.
+
+``pip install '.[view]'`` in the project folder installs viser. Every function returns
+the running ``viser.ViserServer`` (``block=False``) or serves until Ctrl-C.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .open3d_interop import to_point_cloud
+from .registration.multiway import SCAN_COLOURS
+
+__all__ = ["DISPLAY_POINTS", "show_multiway", "show_registration"]
+
+#: Most points drawn per cloud (an even stride through larger clouds).
+DISPLAY_POINTS = 200_000
+_SOURCE, _TARGET, _ALIGNED = (255, 127, 14), (31, 119, 180), (44, 160, 44)
+
+
+def _viser():
+    try:
+        import viser
+    except ImportError:
+        raise ImportError(
+            "the viewer needs viser: pip install '.[view]' in the project folder "
+            "(or pip install viser)"
+        ) from None
+    return viser
+
+
+def _display(points: np.ndarray, limit: int) -> np.ndarray:
+    if len(points) <= limit:
+        return points
+    return points[:: int(np.ceil(len(points) / limit))]
+
+
+def _colours(cloud, default) -> np.ndarray | tuple:
+    """A cloud's own colours as 0-255 bytes, or ``default``."""
+    if cloud.has_colors():
+        return (np.asarray(cloud.colors) * 255).round().astype(np.uint8)
+    return default
+
+
+def _toggle(server, label: str, handles: list, initial: bool = True):
+    box = server.gui.add_checkbox(label, initial)
+
+    @box.on_update
+    def _(_event) -> None:
+        for handle in handles:
+            handle.visible = box.value
+
+    for handle in handles:
+        handle.visible = initial
+    return box
+
+
+def _frame(server, extent: float) -> None:
+    """Point the first view at the scene (centred on the origin) from a distance that
+    shows all of it, with z up."""
+    extent = max(float(extent), 1e-9)
+    server.initial_camera.look_at = (0.0, 0.0, 0.0)
+    server.initial_camera.position = (0.6 * extent, -0.6 * extent, 0.45 * extent)
+    server.initial_camera.up = (0.0, 0.0, 1.0)
+    server.initial_camera.near = extent * 1e-3
+    server.initial_camera.far = extent * 100
+
+
+def _serve(server, block: bool):
+    if block:
+        print(f"viewer: http://localhost:{server.get_port()} (Ctrl-C to stop)", flush=True)
+        try:
+            server.sleep_forever()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            server.stop()
+    return server
+
+
+def _points(cloud, origin, limit):
+    pts = _display(np.asarray(cloud.points) - origin, limit)
+    colours = _colours(cloud, None)
+    if isinstance(colours, np.ndarray):
+        colours = _display(colours, limit)
+    return pts, colours
+
+
+def show_registration(
+    source: Any,
+    target: Any,
+    result: Any,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    point_size: float | None = None,
+    max_lines: int = 500,
+    block: bool = True,
+):
+    """Serve a pair registration: the source as given, the target, the aligned source and
+    the result's inlier correspondences as lines, each toggled from the panel, which
+    also shows the result's numbers and flags.
+
+    Parameters
+    ----------
+    source, target : array-like (n, 3) or Open3D point cloud
+        The clouds that were registered (their own colours are kept; others are drawn
+        orange, blue and green).
+    result : RegistrationResult
+        Or anything with ``transformation`` (a 4x4 from elsewhere): then only the
+        clouds are drawn.
+    host, port : where to serve (``127.0.0.1``: this machine only; ``0.0.0.0`` to reach
+        it from another machine).
+    point_size : float, default=None
+        In the clouds' units; ``None`` is the result's resolution (or 1 % of the
+        target's extent).
+    max_lines : int, default=500
+        Most correspondence lines drawn (an even stride through the inliers).
+    block : bool, default=True
+        Serve until Ctrl-C; ``False`` returns the running server at once.
+
+    Returns
+    -------
+    viser.ViserServer
+    """
+    viser = _viser()
+    src, tgt = to_point_cloud(source, "source"), to_point_cloud(target, "target")
+    transformation = np.asarray(result.transformation, dtype=np.float64)
+    origin = np.asarray(tgt.get_center())  # survey coordinates stay precise on screen
+    extent = float(np.linalg.norm(tgt.get_max_bound() - tgt.get_min_bound()))
+    size = point_size or getattr(result, "voxel_size", 0.0) or 0.01 * extent
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    _frame(server, extent)
+    limit = DISPLAY_POINTS
+    aligned = to_point_cloud(source, "source").transform(transformation)
+    handles = {}
+    for name, cloud, colour in (
+        ("source", src, _SOURCE),
+        ("target", tgt, _TARGET),
+        ("aligned", aligned, _ALIGNED),
+    ):
+        pts, own = _points(cloud, origin, limit)
+        handles[name] = server.scene.add_point_cloud(
+            f"/{name}",
+            pts.astype(np.float32),
+            colour if own is None or name == "aligned" else own,
+            point_size=size,
+            precision="float32",
+        )
+    lines = []
+    pairs = np.asarray(getattr(result, "correspondence_set", np.empty((0, 2))), dtype=np.int64)
+    if len(pairs):
+        pairs = pairs[:: max(1, int(np.ceil(len(pairs) / max_lines)))]
+        ends = np.stack(
+            [
+                np.asarray(src.points)[pairs[:, 0]] - origin,
+                np.asarray(tgt.points)[pairs[:, 1]] - origin,
+            ],
+            axis=1,
+        )
+        lines.append(
+            server.scene.add_line_segments(
+                "/correspondences", ends.astype(np.float32), (214, 39, 40), thickness=size / 4
+            )
+        )
+    server.gui.add_markdown(_summary(result, len(pairs)))
+    _toggle(server, "source (as given)", [handles["source"]], initial=False)
+    _toggle(server, "target", [handles["target"]])
+    _toggle(server, "aligned source", [handles["aligned"]])
+    if lines:
+        _toggle(server, "inlier correspondences", lines, initial=False)
+    return _serve(server, block)
+
+
+def _summary(result, n_lines: int) -> str:
+    rows = ["**Registration**", ""]
+    for label, attr, fmt in (
+        ("fitness", "fitness", "{:.3f}"),
+        ("inlier RMSE", "inlier_rmse", "{:.4g}"),
+        ("distance", "distance", "{:.4g}"),
+        ("resolution", "voxel_size", "{:.4g}"),
+        ("seconds", "seconds", "{:.2f}"),
+        ("converged", "converged", "{}"),
+        ("ambiguous", "ambiguous", "{}"),
+    ):
+        if hasattr(result, attr):
+            rows.append(f"- {label}: {fmt.format(getattr(result, attr))}")
+    for step in getattr(result, "steps", []):
+        rows.append(f"- step {step.name}: fitness {step.fitness:.3f}, {step.seconds:.2f} s")
+    if n_lines:
+        rows.append(f"- {n_lines} inlier correspondences drawn")
+    return "\n".join(rows)
+
+
+def show_multiway(
+    scans: list[Any],
+    result: Any,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    point_size: float | None = None,
+    block: bool = True,
+):
+    """Serve a reconstruction: every placed scan in its own colour (toggled one by one),
+    the pose graph's kept edges as lines between the scans' centres, and the result's
+    numbers in the panel.
+
+    Parameters
+    ----------
+    scans : list of array-like or Open3D point clouds
+        The scans given to :func:`~o3d_rpointhop.register_multiway`, in order.
+    result : MultiwayResult
+    host, port, point_size, block
+        As in :func:`show_registration` (``point_size=None``: the common resolution).
+
+    Returns
+    -------
+    viser.ViserServer
+    """
+    viser = _viser()
+    if len(scans) != len(result.poses):
+        raise ValueError(f"{len(result.poses)} scans were registered, got {len(scans)}")
+    placed = {}
+    for k, (scan, pose) in enumerate(zip(scans, result.poses, strict=True)):
+        if pose is not None:
+            placed[k] = to_point_cloud(scan, f"scans[{k}]").transform(pose)
+    if not placed:
+        raise ValueError("no scan was placed")
+    origin = np.asarray(placed[0].get_center()) if 0 in placed else np.zeros(3)
+    size = point_size or result.voxel_size or 0.01
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    every = np.concatenate([np.asarray(c.points) for c in placed.values()]) - origin
+    _frame(server, float(np.linalg.norm(every.max(axis=0) - every.min(axis=0))))
+    limit = max(1, DISPLAY_POINTS // len(placed))
+    centres = {}
+    boxes = []
+    for k, cloud in placed.items():
+        pts = _display(np.asarray(cloud.points) - origin, limit)
+        centres[k] = pts.mean(axis=0)
+        colour = tuple(int(round(255 * c)) for c in SCAN_COLOURS[k % len(SCAN_COLOURS)])
+        handle = server.scene.add_point_cloud(
+            f"/scan_{k}", pts.astype(np.float32), colour, point_size=size, precision="float32"
+        )
+        boxes.append((f"scan {k}", handle))
+    edges = [(i, j) for i, j in result.edges if i in centres and j in centres]
+    graph = []
+    if edges:
+        ends = np.array([[centres[i], centres[j]] for i, j in edges], dtype=np.float32)
+        graph.append(
+            server.scene.add_line_segments("/pose_graph", ends, (20, 20, 20), thickness=2 * size)
+        )
+    rows = [
+        "**Reconstruction**",
+        "",
+        f"- {len(placed)} of {len(result.poses)} scans placed",
+        f"- {len(result.edges)} edges kept",
+        f"- resolution {result.voxel_size:.4g}, {result.seconds:.1f} s",
+    ]
+    if result.unconnected:
+        rows.append(f"- unconnected: {', '.join(str(k) for k in result.unconnected)}")
+    server.gui.add_markdown("\n".join(rows))
+    for label, handle in boxes:
+        _toggle(server, label, [handle])
+    if graph:
+        _toggle(server, "pose graph edges", graph)
+    return _serve(server, block)
