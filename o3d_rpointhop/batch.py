@@ -23,9 +23,9 @@ from numbers import Integral
 from typing import Any
 
 import numpy as np
-from sklearn.utils._param_validation import HasMethods, validate_params
 
 from ._utils.parallel import parallel_map, single_threaded
+from ._utils.params import HasMethods, validate_params
 from ._utils.validation import as_points
 from .registration import register
 from .registration.defaults import default_descriptor

@@ -4,22 +4,30 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["progress_bar", "wants_progress"]
-
-
-def wants_progress(enabled: bool | None, large: bool = True) -> bool:
-    """``True``/``False`` as asked; ``None``: only for a large job with stderr a terminal
-    (so tests, pipes, log files and CI stay silent)."""
-    if enabled is not None:
-        return bool(enabled)
-    isatty = getattr(sys.stderr, "isatty", None)
-    return bool(large and isatty is not None and isatty())
+__all__ = ["progress_bar"]
 
 
 def progress_bar(total: int, *, desc: str, unit: str, enabled: bool | None, large: bool = True):
-    """A ``tqdm`` bar on stderr, or ``None`` when :func:`wants_progress` says no."""
-    if not wants_progress(enabled, large):
+    """A ``tqdm`` bar on stderr, or ``None`` for no bar.
+
+    ``enabled``: ``True``/``False`` as asked; ``None``: a bar only for a ``large`` job,
+    and only when stderr is a terminal (tqdm's own ``disable=None`` rule), so tests,
+    pipes, log files and CI stay silent.
+    """
+    if enabled is False or (enabled is None and not large):
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
+    bar = tqdm(
+        total=total,
+        desc=desc,
+        unit=unit,
+        file=sys.stderr,
+        leave=False,
+        dynamic_ncols=True,
+        disable=None if enabled is None else False,
+    )
+    if bar.disable:
+        bar.close()
+        return None
+    return bar

@@ -33,13 +33,33 @@ class CommandError(Exception):
     """A failure to report as one line on stderr with exit status 1."""
 
 
-def check_size(path: str, nbytes: int, force: bool) -> None:
+def check_size(
+    path: str,
+    nbytes: int,
+    force: bool,
+    hint: str = "shorten the descriptor with --n-components",
+) -> None:
     """Refuse an output over :data:`MAX_OUTPUT_BYTES` unless ``force``."""
     if nbytes > MAX_OUTPUT_BYTES and not force:
         raise CommandError(
             f"{path}: would write {nbytes / 1024**2:,.0f} MB (limit {MAX_OUTPUT_BYTES // 1024**2} "
-            "MB without --force); pass --force, or shorten the descriptor with --n-components"
+            f"MB without --force); pass --force, or {hint}"
         )
+
+
+def cloud_bytes(cloud) -> int:
+    """About what writing an Open3D cloud takes: float64 points and normals, byte
+    colours."""
+    per_point = 24 + (24 if cloud.has_normals() else 0) + (3 if cloud.has_colors() else 0)
+    return per_point * len(cloud.points)
+
+
+def add_force(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help=f"write outputs over {MAX_OUTPUT_BYTES // 1024**2} MB",
+    )
 
 
 def auto_or(convert, what: str, valid, problem: str):

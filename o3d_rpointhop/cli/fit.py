@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from ._common import EXIT_OK
+from ._common import EXIT_OK, add_viewpoints
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -29,6 +29,7 @@ def _sizes(text: str) -> tuple[float | int, ...]:
 _PARAMETERS = (
     "n_neighbors",
     "hop_sizes",
+    "pooling",
     "lrf_neighbors",
     "energy_threshold",
     "fit_subsample",
@@ -39,8 +40,22 @@ _PARAMETERS = (
 
 def add_parser(commands) -> None:
     p = commands.add_parser("fit", help="fit an R-PointHop model on point cloud files")
-    p.add_argument("clouds", nargs="+", help="training clouds (.ply, .pcd, .xyz, .npy, ...)")
+    p.add_argument("clouds", nargs="+", help="training clouds (.ply, .las, .e57, .npy, ...)")
     p.add_argument("-o", "--output", required=True, help="model file to write (.npz)")
+    p.add_argument(
+        "--scene",
+        action="store_true",
+        help="the scene variant: the shipped scene model's recipe (normals and eigenvalue "
+        "features as attributes, one hop of 96 neighbours, 96 axes); other options "
+        "override it",
+    )
+    p.add_argument(
+        "--n-components",
+        type=_components,
+        default=argparse.SUPPRESS,
+        help="principal axes the model keeps ('none': the full descriptor)",
+    )
+    p.add_argument("--pooling", choices=["octants", "azimuth"])
     p.add_argument("--n-neighbors", type=_ints, help="per hop, e.g. 64,32,48,48")
     p.add_argument("--hop-sizes", type=_sizes, help="per hop, e.g. 1.0,0.75,0.5,0.375")
     p.add_argument("--lrf-neighbors", type=int)
@@ -48,7 +63,20 @@ def add_parser(commands) -> None:
     p.add_argument("--fit-subsample", type=int)
     p.add_argument("--n-jobs", type=int)
     p.add_argument("--random-state", type=int)
+    add_viewpoints(p, "training cloud")
     p.set_defaults(func=run)
+
+
+def _components(text: str) -> int | None:
+    if text.lower() == "none":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive count or 'none', got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,8 +86,14 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.output)
     clouds = [read_cloud(p) for p in args.clouds]
     params = {name: getattr(args, name) for name in _PARAMETERS if getattr(args, name) is not None}
+    if hasattr(args, "n_components"):  # given ('none' too)
+        params["n_components"] = args.n_components
+    if args.scene:
+        from ..evaluation.scene_models import SCENE_PARAMS
+
+        params = {**SCENE_PARAMS, **params}
     start = time.perf_counter()
-    model = RPointHopTransformer(**params).fit(clouds)
+    model = RPointHopTransformer(**params).fit(clouds, viewpoints=args.viewpoints)
     model.save(args.output)
     print(
         f"fitted on {len(clouds)} clouds in {time.perf_counter() - start:.2f} s: "

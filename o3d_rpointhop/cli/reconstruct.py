@@ -13,9 +13,12 @@ from ._common import (
     PROG,
     CommandError,
     add_descriptor,
+    add_force,
     add_model,
     add_seed,
     add_viewpoints,
+    check_size,
+    cloud_bytes,
     descriptor_of,
 )
 from .view import add_view
@@ -63,6 +66,7 @@ def add_parser(commands) -> None:
     p.add_argument("--n-jobs", type=int, help="parallel pair registrations")
     add_viewpoints(p, "scan")
     add_seed(p)
+    add_force(p)
     add_view(p)
     p.set_defaults(func=run)
 
@@ -88,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         progress=None,
     )
     merged = result.merge(scans, voxel_size=args.voxel_size, colour=args.colour_by_scan)
+    check_size(args.output, cloud_bytes(merged), args.force, "downsample with --voxel-size")
     write_cloud(args.output, merged)
     summary = result.as_dict(list(args.scans))
     if args.poses:

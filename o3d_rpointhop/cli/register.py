@@ -13,11 +13,14 @@ from ._common import (
     CommandError,
     add_config,
     add_descriptor,
+    add_force,
     add_json,
     add_model,
     add_seed,
     add_viewpoints,
     auto_or,
+    check_size,
+    cloud_bytes,
     descriptor_of,
     flag_status,
 )
@@ -88,6 +91,7 @@ def add_parser(commands) -> None:
         "RegistrationResult.load reads it back",
     )
     add_json(p)
+    add_force(p)
     add_view(p)
     p.set_defaults(func=run)
 
@@ -142,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     summary.update({"source": args.source, "target": args.target})
     if args.output:
         aligned = type(source)(source).transform(result.transformation)  # a copy
+        check_size(args.output, cloud_bytes(aligned), args.force, "downsample the source")
         write_cloud(args.output, aligned)
         summary["aligned_cloud"] = args.output
     if args.transform:

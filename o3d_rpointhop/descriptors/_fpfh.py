@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 from sklearn.base import _fit_context, clone
-from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._utils.geometry import point_spacing
+from .._utils.params import Interval, StrOptions
 from .._utils.validation import as_cloud_list, as_viewpoints, is_open3d_cloud
 from ._base import BaseDescriptor
 

@@ -12,9 +12,9 @@ import numpy as np
 from joblib import effective_n_jobs
 from sklearn.base import _fit_context
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
+from .._utils.params import Interval, StrOptions
 from .._utils.validation import as_cloud_list, as_viewpoints
 from ._base import BaseDescriptor
 from ._persistence import load_model, save_model

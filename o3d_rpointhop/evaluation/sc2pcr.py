@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 from joblib import effective_n_jobs
-from sklearn.utils._param_validation import Interval
 
 from .._utils.compiled import kernel, prange, threads
+from .._utils.params import Interval
 from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
 from ..registration.steps import ConsensusGlobal

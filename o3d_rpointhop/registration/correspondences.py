@@ -8,7 +8,8 @@ from numbers import Integral, Real
 
 import numpy as np
 import open3d as o3d
-from sklearn.utils._param_validation import Interval, validate_params
+
+from .._utils.params import Interval, validate_params
 
 __all__ = ["Correspondences", "count_of", "find_correspondences", "nearest_descriptors"]
 

@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
-from sklearn.utils._param_validation import HasMethods, Interval, StrOptions, validate_params
 
 from .._utils.geometry import point_spacing
 from .._utils.parallel import parallel_map, single_threaded
+from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints
 from ..open3d_interop import to_point_cloud

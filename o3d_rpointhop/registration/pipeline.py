@@ -9,16 +9,16 @@ from typing import Any
 
 import numpy as np
 from sklearn.base import clone
-from sklearn.utils._param_validation import (
+from sklearn.utils.metaestimators import _BaseComposition
+from sklearn.utils.validation import check_is_fitted
+
+from .._utils.params import (
     HasMethods,
     Interval,
     InvalidParameterError,
     StrOptions,
     validate_params,
 )
-from sklearn.utils.metaestimators import _BaseComposition
-from sklearn.utils.validation import check_is_fitted
-
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method
 from .quality import RegistrationWarning, assess, warn_flags

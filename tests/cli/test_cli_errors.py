@@ -70,6 +70,11 @@ def test_cli_output_paths_are_exact_and_large_outputs_need_force(files, monkeypa
     assert main(["describe", "obj.npy", "-o", "big.npy"]) == EXIT_ERROR
     assert "--force" in capsys.readouterr().err and not (files / "big.npy").exists()
     assert main(["describe", "obj.npy", "-o", "big.npy", "--force"]) == EXIT_OK
+    # The aligned cloud of register is held to the same limit.
+    capsys.readouterr()
+    assert main(["register", "obj.npy", "obj.npy", "-o", "aligned.ply"]) == EXIT_ERROR
+    assert "--force" in capsys.readouterr().err and not (files / "aligned.ply").exists()
+    assert main(["register", "obj.npy", "obj.npy", "-o", "aligned.ply", "--force"]) == EXIT_OK
     assert main(["fit", "obj.npy", "other.npy", "-o", "model"]) == EXIT_OK
     assert (files / "model").is_file() and not (files / "model.npz").exists()
     RPointHopTransformer.load(files / "model")

@@ -99,6 +99,29 @@ def test_fit_passes_hop_parameters(tmp_path):
     assert model.lrf_neighbors == 20 and model.energy_threshold == 0.01
 
 
+def test_fit_the_scene_variant_with_axes_and_viewpoints(tmp_path):
+    from o3d_rpointhop.evaluation.scene_models import SCENE_PARAMS
+
+    clouds = [
+        write_points(tmp_path / f"c{i}.npy", make_object(900, shape_seed=i) + [0, 0, 3.0])
+        for i in range(2)
+    ]
+    out = tmp_path / "m.npz"
+    common = ["fit", *clouds, "-o", str(out), "--lrf-neighbors", "32"]
+    assert main([*common, "--scene", "--n-components", "8", "--viewpoints", "origin"]) == 0
+    model = RPointHopTransformer.load(out)
+    assert model.attributes == SCENE_PARAMS["attributes"] and model.n_neighbors == (96,)
+    assert model.lrf_neighbors == 32 and model.n_features_out_ == 8  # options win
+    expected = RPointHopTransformer(**{**SCENE_PARAMS, "lrf_neighbors": 32, "n_components": 8})
+    expected.fit([read_cloud(c) for c in clouds], viewpoints="origin")
+    cloud = read_cloud(clouds[0])
+    np.testing.assert_array_equal(
+        model.transform(cloud, viewpoints="origin"), expected.transform(cloud, viewpoints="origin")
+    )
+    assert main([*common, "--n-components", "none"]) == 0
+    assert RPointHopTransformer.load(out).n_components is None
+
+
 def test_demo_registers_the_synthetic_pair_and_draws_it(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["demo", "--synthetic", "--json", "--output-dir", str(out)]) == 0

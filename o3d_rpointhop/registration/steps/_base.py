@@ -19,8 +19,8 @@ from numbers import Real
 
 import numpy as np
 from sklearn.base import BaseEstimator
-from sklearn.utils._param_validation import Interval
 
+from ..._utils.params import Interval
 from ..context import RegistrationContext
 from ..result import StepResult
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.utils._param_validation import HasMethods, Interval
 
+from ..._utils.params import HasMethods, Interval
 from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
 from ..defaults import default_descriptor

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 from joblib import effective_n_jobs
-from sklearn.utils._param_validation import Interval, StrOptions
 
+from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
 from ..result import StepResult

@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
-from sklearn.utils._param_validation import Interval, StrOptions
 
+from ..._utils.params import Interval, StrOptions
 from ..._utils.threads import repeatable_open3d
 from ..context import RegistrationContext
 from ..result import StepResult

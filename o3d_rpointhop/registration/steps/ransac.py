@@ -6,8 +6,8 @@ from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
-from sklearn.utils._param_validation import Interval, StrOptions
 
+from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE

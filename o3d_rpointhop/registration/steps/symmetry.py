@@ -14,8 +14,8 @@ from numbers import Real
 
 import numpy as np
 from sklearn.base import clone
-from sklearn.utils._param_validation import HasMethods, Interval
 
+from ..._utils.params import HasMethods, Interval
 from ..context import RegistrationContext
 from ..quality import twin_transformations
 from ..result import StepResult
