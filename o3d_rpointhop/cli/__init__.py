@@ -1,8 +1,10 @@
 """Command line interface: ``o3d-rpointhop <command> ...``, one module per command.
 
 Each command module declares its options (``add_parser``) and runs the library
-(``run``), importing it lazily so that ``--help`` answers at once; the options several
-commands share are declared once in :mod:`._common`.
+(``run``), importing it lazily; only the command being run declares all its options
+(the others only their name and help line), so that ``--help`` and a command's own
+``--help`` load only what they need. The options several commands share are declared
+once in :mod:`._common`.
 """
 
 from __future__ import annotations
@@ -40,7 +42,21 @@ __all__ = [
 COMMANDS = (demo, register, evaluate, view, config, benchmark, reconstruct, fit, describe)
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Declared(Exception):
+    """Raised once a command not being run has declared its name and help line."""
+
+
+def _chosen(argv: Sequence[str] | None) -> str | None:
+    """The command named on the command line (its first word that is not an option)."""
+    words = sys.argv[1:] if argv is None else list(argv)
+    return next((w for w in words if not w.startswith("-")), None)
+
+
+def build_parser(
+    argv: Sequence[str] | None = None, *, every: bool = False
+) -> argparse.ArgumentParser:
+    """The parser; with ``every`` (or for the command ``argv`` names) the commands'
+    options are declared in full, otherwise only their names and help lines."""
     parser = argparse.ArgumentParser(
         prog=PROG,
         description="Rotation-invariant R-PointHop descriptors and registration for Open3D.",
@@ -51,20 +67,28 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    chosen = _chosen(argv)
+
     class _Sub:  # every command's --help lists the exit statuses too
         @staticmethod
         def add_parser(name, **kwargs):
             kwargs.setdefault("epilog", EXIT_CODES)
             kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
-            return commands.add_parser(name, **kwargs)
+            sub = commands.add_parser(name, **kwargs)
+            if not every and name != chosen:
+                raise _Declared
+            return sub
 
     for command in COMMANDS:
-        command.add_parser(_Sub())
+        try:
+            command.add_parser(_Sub())
+        except _Declared:
+            pass
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -9,19 +9,21 @@ from ._common import EXIT_OK, CommandError, add_data, add_model, add_seed, load_
 
 
 def add_parser(commands) -> None:
+    p = commands.add_parser(
+        "benchmark",
+        help="registration benchmarks against the paper and FPFH (JSON, markdown, PNG)",
+    )
     from ..evaluation.bunny import BUNNY_PROTOCOLS
     from ..evaluation.methods import DATASETS
     from ..evaluation.modelnet40 import MODELNET40_PROTOCOLS
     from ..evaluation.multiway import OBJECTS
 
-    p = commands.add_parser(
-        "benchmark",
-        help="registration benchmarks against the paper and FPFH (JSON, markdown, PNG)",
-        description="Run every method on the dataset's protocols in one run and write "
+    p.description = (
+        "Run every method on the dataset's protocols in one run and write "
         "<output>/<dataset>.json, .md and .png. ModelNet40 protocols: "
         f"{', '.join(MODELNET40_PROTOCOLS)}; bunny: {', '.join(BUNNY_PROTOCOLS)}; "
         f"multiway: {', '.join(OBJECTS)} (every scan from an unknown pose, rebuilt with "
-        "register_multiway).",
+        "register_multiway)."
     )
     p.add_argument("dataset", choices=[*DATASETS, "multiway"])
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")

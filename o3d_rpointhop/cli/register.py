@@ -32,8 +32,6 @@ _global_points = auto_or(int, "a count", lambda v: v >= 3, "need at least 3 glob
 
 
 def add_parser(commands) -> None:
-    from ..registration.pipeline import GLOBAL_METHODS, REFINE_METHODS
-
     p = commands.add_parser(
         "register",
         help="align SOURCE to TARGET: global estimate from descriptors, then ICP",
@@ -41,6 +39,8 @@ def add_parser(commands) -> None:
         "source into the target frame. Clouds: .ply, .pcd, .xyz, .pts, .las/.laz, .e57, "
         "KITTI .bin, meshes (.obj, .stl, .off, .glb), .npy/.npz/.txt/.csv.",
     )
+    from ..registration.pipeline import GLOBAL_METHODS, REFINE_METHODS
+
     p.add_argument("source")
     p.add_argument("target")
     add_descriptor(p)
