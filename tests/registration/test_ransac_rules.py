@@ -1,0 +1,87 @@
+"""RANSAC's own rules on matches with a known answer: the number of draws its stopping
+rule asks for, the cap, and which hypothesis wins with and without whole-cloud
+verification."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import motion_matrix, random_motion
+
+from o3d_rpointhop.registration.steps._ransac import _needed, ransac
+from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
+
+
+def test_the_draws_needed_follow_the_textbook_formula():
+    # log(1 - p) / log(1 - w^n), by hand: log(0.01) / log(0.875) = 34.4875...
+    assert _needed(0.5, 0.99, 3) == pytest.approx(34.4875, abs=1e-3)
+    assert _needed(0.2, 0.999, 3) == pytest.approx(860.01, abs=0.01)
+    assert _needed(1.0, 0.99, 3) == 0.0
+    assert _needed(0.0, 0.99, 3) == np.inf
+    assert _needed(0.5, 0.99, 4) > _needed(0.5, 0.99, 3)  # bigger samples, more draws
+
+
+def _planted(n: int, share: float, seed: int, motion: np.ndarray):
+    """Exact matches under ``motion`` for a ``share`` of ``n``; the rest pair random
+    points of a 10 m box (never within the threshold of any one motion's prediction)."""
+    rng = np.random.default_rng(seed)
+    source = rng.uniform(-1, 1, (n, 3))
+    target = apply_transform(source, motion)
+    wrong = rng.choice(n, n - int(round(share * n)), replace=False)
+    target[wrong] = rng.uniform(-5, 5, (len(wrong), 3))
+    return source, target
+
+
+def test_drawing_stops_at_the_first_batch_boundary_past_the_rule():
+    truth = motion_matrix(*random_motion(3, 0.5))
+    source, target = _planted(1000, 0.2, seed=1, motion=truth)
+    found = ransac(
+        source, target, 0.01, max_iteration=100_000, confidence=0.999, edge_length=0.9, seed=0
+    )
+    assert rotation_error_deg(found.transformation, truth) < 1e-4
+    ratio = found.inliers.sum() / len(source)
+    assert ratio == pytest.approx(0.2, abs=0.002)
+    # Batches of 256, 512, 1024, ...: 768 draws are short of the 860 the rule asks
+    # for at w = 0.2, so a third batch runs, and no fourth.
+    assert found.iterations == 256 + 512 + 1024
+    capped = ransac(
+        source, target, 0.01, max_iteration=300, confidence=0.999, edge_length=0.9, seed=0
+    )
+    assert capped.iterations == 300  # the cap, to the draw
+    easy_source, easy_target = _planted(500, 1.0, seed=2, motion=truth)
+    easy = ransac(
+        easy_source,
+        easy_target,
+        0.01,
+        max_iteration=100_000,
+        confidence=0.999,
+        edge_length=0.9,
+        seed=0,
+    )
+    assert easy.iterations == 256  # every match an inlier: one batch is enough
+
+
+def test_verification_prefers_the_whole_clouds_fit_over_the_match_count():
+    """Two consistent groups of matches: the larger one is a wrong motion, the smaller
+    the true one. Without the clouds RANSAC keeps the hypothesis with the most inlier
+    matches; with them, the one whose clouds fit."""
+    rng = np.random.default_rng(5)
+    truth = motion_matrix(*random_motion(4, 0.3))
+    decoy = motion_matrix(*random_motion(9, 0.3))
+    cloud = rng.uniform(-1, 1, (3000, 3))
+    moved = apply_transform(cloud, truth)
+    true_src = cloud[:150]
+    decoy_src = cloud[150:350]
+    source = np.concatenate([true_src, decoy_src, cloud[350:1000]])
+    target = np.concatenate(
+        [
+            apply_transform(true_src, truth),
+            apply_transform(decoy_src, decoy),
+            rng.uniform(-5, 5, (650, 3)),
+        ]
+    )
+    kwargs = dict(max_iteration=20_000, confidence=0.9999, edge_length=0.9, seed=0)
+    by_matches = ransac(source, target, 0.01, **kwargs)
+    assert rotation_error_deg(by_matches.transformation, decoy) < 1e-4
+    by_clouds = ransac(source, target, 0.01, clouds=(cloud, moved), **kwargs)
+    assert rotation_error_deg(by_clouds.transformation, truth) < 1e-4
