@@ -77,13 +77,15 @@ def test_ci_runs_the_readme_test_command():
 
 
 def test_console_script_entry_point():
-    out = subprocess.run(
+    """The installed ``o3d-rpointhop`` script (beside this Python) and ``python -m``."""
+    script = Path(sys.executable).parent / "o3d-rpointhop"
+    assert script.is_file(), "the console script is not installed beside this Python"
+    for command in (
+        [str(script), "--version"],
         [sys.executable, "-m", "o3d_rpointhop.cli", "--version"],
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    assert out.stdout.startswith("o3d-rpointhop ")
+    ):
+        out = subprocess.run(command, capture_output=True, text=True, check=True)
+        assert out.stdout.startswith("o3d-rpointhop ")
 
 
 def test_registration_docs_tables_match_the_code():

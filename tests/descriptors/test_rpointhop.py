@@ -242,3 +242,26 @@ def test_transform_gives_a_result_or_a_clear_value_error(points):
         assert str(exc)  # a message, not a crash deep in numpy
         return
     assert out.shape == (len(points), 8) and np.isfinite(out).all()
+
+
+def test_a_patch_without_skew_is_oriented_towards_the_reference_point():
+    """The zero-skew fallback, reached on purpose: a flat, centrally symmetric patch has
+    no skew along its normal (nor across it), so the normal must point towards
+    ``towards`` (the centroid) whichever side that is, and turn with the patch."""
+    from o3d_rpointhop.descriptors.pointhop._frames import local_reference_frames
+
+    grid = np.array([[x, y, 0.0] for x in (-2, -1, 0, 1, 2) for y in (-1, 0, 1)], float)
+    grid[:, 0] *= 1.5  # distinct eigenvalues: x first, then y, the normal z last
+    offsets = grid.T[:, None, :]  # one point at the origin, its 15 neighbours
+    for side in (1.0, -1.0):
+        towards = np.array([[0.3], [0.2], [side]])
+        frames, _ = local_reference_frames(offsets, 15, towards)
+        normal = frames[0, :, 2]
+        assert np.allclose(np.abs(normal), [0, 0, 1])
+        assert np.sign(normal[2]) == side  # the fallback decided, not rounding
+        assert np.sign(frames[0, 0, 0]) == 1.0  # the x axis towards +0.3, likewise
+        rot, _ = random_motion(int(side > 0) + 3)
+        turned, _ = local_reference_frames(
+            np.einsum("ij,jqm->iqm", rot, offsets), 15, rot @ towards
+        )
+        np.testing.assert_allclose(turned[0], rot @ frames[0], atol=1e-9)

@@ -62,6 +62,18 @@ def test_multiscale_pulls_in_a_poor_start(object_target):
 
 
 def test_point_to_point_has_no_kernel_and_bad_kernels_are_named(object_target):
+    from o3d_rpointhop import PointToPointICP
+
+    assert "kernel" not in PointToPointICP().get_params()
+    with pytest.raises(TypeError, match="kernel"):
+        PointToPointICP(kernel="huber")
+    source, truth = moved_copy(object_target, 2, permute=False)
+    start = truth.copy()
+    start[:3, 3] += [0.005, 0.0, 0.0]
+    plain = register(
+        source, object_target, global_method=None, refine=PointToPointICP(), init=start
+    )
+    assert np.abs(plain.transformation - truth).max() < 1e-4  # it runs, and converges
     with pytest.raises(ValueError, match="step 'refine': The 'kernel' parameter of PointToPlane"):
         register(
             object_target, object_target, global_method=None, refine=PointToPlaneICP(kernel="fancy")
