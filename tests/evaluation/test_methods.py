@@ -73,7 +73,7 @@ def test_every_method_runs(shapes):
     for name in METHODS:
         if name == "kiss-matcher" and not kiss_matcher_available():
             # the optional peer: without its wheel the method refuses with the install line
-            with pytest.raises(ValueError, match=r"o3d-rpointhop\[peers\]"):
+            with pytest.raises(ValueError, match=r"pip install '\.\[peers\]'"):
                 run_method(name, pair.source, pair.target, descriptor=model, voxel=0.05)
             continue
         run = run_method(name, pair.source, pair.target, descriptor=model, voxel=0.05)
