@@ -133,3 +133,101 @@ def test_mcnemar_counts_discordant_pairs_and_gives_the_exact_p_value():
     # Two-sided exact binomial: 2 * P(X <= 2), X ~ Bin(12, 1/2) = 2 * 79 / 4096.
     assert test["p_value"] == pytest.approx(2 * 79 / 4096)
     assert mcnemar(a, a) == {"a_only": 0, "b_only": 0, "p_value": 1.0}
+
+
+def test_the_paper_s_errors_by_hand():
+    """Euler-angle and per-axis translation errors keep their signs (estimate minus
+    truth) and wrap into [-180, 180)."""
+    from o3d_rpointhop.evaluation.metrics import _wrap
+
+    truth = _motion((0.0, 0.0, np.deg2rad(170.0)), (1.0, 2.0, 3.0))
+    estimate = _motion((0.0, 0.0, np.deg2rad(-175.0)), (1.5, 1.0, 3.25))
+    e = pair_errors(estimate, truth)
+    # -175 - 170 = -345 degrees, i.e. +15 after wrapping.
+    assert e["euler_error_deg"] == pytest.approx([0.0, 0.0, 15.0], abs=1e-9)
+    assert e["translation_error_xyz"] == pytest.approx([0.5, -1.0, 0.25])
+    assert e["rotation_error_deg"] == pytest.approx(15.0)
+    np.testing.assert_allclose(_wrap(np.array([359.0, 180.0, -181.0, 0.5])), [-1, -180, 179, 0.5])
+
+
+def test_the_paper_s_summary_by_hand():
+    """Two records with hand-computed means: MSE, RMSE and MAE over the three Euler
+    angles and the three translation components, medians, success, timing, and the MAE
+    that leaves out the failures that are symmetries."""
+    a = {
+        "euler_error_deg": [1.0, -2.0, 2.0],
+        "translation_error_xyz": [0.01, 0.0, -0.02],
+        "rotation_error_deg": 3.0,
+        "translation_error": 0.03,
+        "seconds": 1.0,
+        "symmetric": False,
+    }
+    b = {
+        "euler_error_deg": [0.0, 180.0, -90.0],
+        "translation_error_xyz": [0.3, -0.4, 0.0],
+        "rotation_error_deg": 120.0,
+        "translation_error": 0.5,
+        "seconds": 2.0,
+        "symmetric": True,
+    }
+    c = {**b, "rotation_error_deg": 4.0, "translation_error": 0.07, "symmetric": False}
+    s = summarize([a, b, c])
+    euler = np.array([1, -2, 2, 0, 180, -90, 0, 180, -90], float)
+    trans = np.array([0.01, 0, -0.02, 0.3, -0.4, 0, 0.3, -0.4, 0])
+    assert s["pairs"] == 3 and s["seconds_per_pair"] == pytest.approx(5 / 3)
+    assert s["mse_r"] == pytest.approx(np.mean(euler**2))
+    assert s["rmse_r"] == pytest.approx(np.sqrt(np.mean(euler**2)))
+    assert s["mae_r"] == pytest.approx(np.mean(np.abs(euler)))
+    assert s["mse_t"] == pytest.approx(np.mean(trans**2))
+    assert s["rmse_t"] == pytest.approx(np.sqrt(np.mean(trans**2)))
+    assert s["mae_t"] == pytest.approx(np.mean(np.abs(trans)))
+    assert s["median_rotation_error_deg"] == 4.0 and s["median_translation_error"] == 0.07
+    # a: both within 5 deg / 0.05; c: rotation within, translation not; b: neither.
+    assert s["success_rate"] == pytest.approx(1 / 3)
+    assert s["success_rate_up_to_symmetry"] == pytest.approx(2 / 3)
+    kept = np.array([1, -2, 2, 0, 180, -90], float)  # a and c: b is a symmetric failure
+    assert s["mae_r_not_symmetric"] == pytest.approx(np.mean(np.abs(kept)))
+    # The thresholds are strict and can be moved.
+    assert summarize([a], rotation_tol=3.0)["success_rate"] == 0.0
+    assert summarize([a], translation_tol=0.03)["success_rate"] == 0.0
+    assert summarize([c], translation_tol=0.08)["success_rate"] == 1.0
+    unmarked = {k: v for k, v in a.items() if k != "symmetric"}
+    assert "success_rate_up_to_symmetry" not in summarize([unmarked])
+    only_symmetric = summarize([b])
+    assert only_symmetric["mae_r_not_symmetric"] == 0.0  # nothing left to average
+
+
+def test_symmetry_check_boundaries():
+    """The identity is a symmetry of any shape (a moved distance of 0 is not above the
+    reference), and the reference is the spacing between the shape's two halves: on this
+    seeded blob a 15 degree turn moves the points 0.223 on average, inside the halves'
+    spacing (0.246), and a 20 degree turn 0.252, outside it (thirds would give 0.278)."""
+    rng = np.random.default_rng(3)
+    blob = rng.normal(size=(3000, 3)) * [3.0, 1.0, 0.5]
+    assert is_symmetry(np.eye(4), np.eye(4), blob)
+    assert is_symmetry(_motion((0.0, 0.0, np.deg2rad(15.0))), np.eye(4), blob)
+    assert not is_symmetry(_motion((0.0, 0.0, np.deg2rad(20.0))), np.eye(4), blob)
+
+
+def test_success_needs_5_degrees_and_5_centimetres_by_default():
+    near = {
+        "euler_error_deg": [0.0, 0.0, 5.5],
+        "translation_error_xyz": [0.0, 0.0, 0.0],
+        "rotation_error_deg": 5.5,
+        "translation_error": 0.0,
+        "seconds": 1.0,
+    }
+    assert summarize([near])["success_rate"] == 0.0
+    assert summarize([{**near, "rotation_error_deg": 4.9}])["success_rate"] == 1.0
+    assert (
+        summarize([{**near, "rotation_error_deg": 1.0, "translation_error": 0.051}])["success_rate"]
+        == 0.0
+    )
+
+
+def test_mcnemar_takes_successes_as_0_and_1_too():
+    a = np.array([1, 1, 1, 0, 0, 1])
+    b = np.array([1, 0, 0, 0, 1, 1])
+    as_ints, as_bools = mcnemar(a, b), mcnemar(a.astype(bool), b.astype(bool))
+    assert as_ints == as_bools
+    assert (as_ints["a_only"], as_ints["b_only"]) == (2, 1)
