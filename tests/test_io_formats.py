@@ -136,3 +136,43 @@ def test_read_points_register(tmp_path):
     cloud = read_cloud(tmp_path / "t.las")
     result = register(cloud, cloud, global_method=None)
     np.testing.assert_allclose(result.transformation, np.eye(4), atol=1e-6)
+
+
+def test_survey_scans_keep_their_colours_through_the_command_line(tmp_path, capsys):
+    """Three LAS scans with colours, rebuilt by ``o3d-rpointhop reconstruct``: the merged
+    cloud holds every point in its scan's own colour; ``describe`` reads LAZ, E57 and
+    KITTI files as ``read_cloud`` does."""
+    from helpers import partial_views
+
+    from o3d_rpointhop import RPointHopTransformer
+    from o3d_rpointhop.cli import main
+
+    scans, _ = partial_views(3, seed=1)
+    names = []
+    for k, scan in enumerate(scans):
+        rgb = np.tile(np.array([[60000, 20000 * k, 0]], dtype=np.uint16), (len(scan), 1))
+        _las(tmp_path / f"s{k}.las", OFFSET + scan, rgb)
+        names.append(str(tmp_path / f"s{k}.las"))
+    out = tmp_path / "merged.ply"
+    assert main(["reconstruct", *names, "-o", str(out)]) == 0
+    merged = o3d.io.read_point_cloud(str(out))
+    assert len(merged.points) == sum(len(s) for s in scans)
+    colours = {tuple(c) for c in np.asarray(merged.colors).round(1)}  # PLY keeps 8 bits
+    assert colours == {(0.9, 0.0, 0.0), (0.9, 0.3, 0.0), (0.9, 0.6, 0.0)}
+    assert np.abs(np.asarray(merged.points).mean(axis=0) - OFFSET).max() < 10  # in place
+
+    records = np.c_[scans[0], np.zeros(len(scans[0]))].astype("<f4")
+    records.tofile(tmp_path / "sweep.bin")
+    _las(tmp_path / "scan.laz", OFFSET + scans[0])
+    pye57 = pytest.importorskip("pye57")
+    with pye57.E57(str(tmp_path / "scan.e57"), mode="w") as e57:
+        e57.write_scan_raw({f"cartesian{a}": scans[0][:, k] for k, a in enumerate("XYZ")})
+    model = RPointHopTransformer.pretrained(n_components=8)
+    for name in ("sweep.bin", "scan.laz", "scan.e57"):
+        path = tmp_path / name
+        assert (
+            main(["describe", str(path), "--n-components", "8", "-o", str(tmp_path / "d.npy")]) == 0
+        )
+        np.testing.assert_array_equal(
+            np.load(tmp_path / "d.npy"), model.transform(read_cloud(path))
+        )
