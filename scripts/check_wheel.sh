@@ -28,7 +28,8 @@ where = pathlib.Path(o3d_rpointhop.__file__).resolve()
 assert "site-packages" in where.parts, f"imported from {where}, not from the wheel"
 full = RPointHopTransformer.pretrained()
 scene = RPointHopTransformer.pretrained("scene")
-assert (full.n_features_out_, scene.n_features_out_) == (1624, 128)
+assert (full.n_features_out_, scene.n_features_out_) == (1624, 96)
+assert (where.parent / "py.typed").is_file(), "py.typed is not in the wheel"
 print(f"wheel check: both models load from {where.parent}")
 
 # The compiled consensus kernels compile (or load from numba's cache) from the wheel.
