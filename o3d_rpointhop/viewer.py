@@ -101,9 +101,10 @@ def show_registration(
     max_lines: int = 500,
     block: bool = True,
 ):
-    """Serve a pair registration: the source as given, the target, the aligned source and
-    the result's inlier correspondences as lines, each toggled from the panel, which
-    also shows the result's numbers and flags.
+    """Serve a pair registration: the source as given, the target, the aligned source,
+    the global step's descriptor matches as lines (those its estimate kept, and the
+    others; drawn between the clouds as given) and the result's inlier correspondences,
+    each toggled from the panel, which also shows the result's numbers and flags.
 
     Parameters
     ----------
@@ -119,7 +120,7 @@ def show_registration(
         In the clouds' units; ``None`` is the result's resolution (or 1 % of the
         target's extent).
     max_lines : int, default=500
-        Most correspondence lines drawn (an even stride through the inliers).
+        Most lines drawn per kind (an even stride through them).
     block : bool, default=True
         Serve until Ctrl-C; ``False`` returns the running server at once.
 
@@ -151,7 +152,27 @@ def show_registration(
             point_size=size,
             precision="float32",
         )
-    lines = []
+    step = next(
+        (t for t in getattr(result, "steps", []) if getattr(t, "matches", None) is not None),
+        None,
+    )
+    toggles = []
+    if step is not None and len(step.matches):  # the global step's descriptor matches
+        ends = step.matches - origin
+        inside = np.asarray(step.match_inliers, dtype=bool)
+        for label, keep, colour, shown in (
+            ("global step: matches it kept", inside, (44, 160, 44), True),
+            ("global step: other matches", ~inside, (214, 39, 40), False),
+        ):
+            chosen = ends[keep][:: max(1, int(np.ceil(keep.sum() / max_lines)))]
+            if len(chosen):
+                handle = server.scene.add_line_segments(
+                    f"/matches_{'kept' if shown else 'other'}",
+                    chosen.astype(np.float32),
+                    colour,
+                    thickness=size / 4,
+                )
+                toggles.append((label, handle, False))
     pairs = np.asarray(getattr(result, "correspondence_set", np.empty((0, 2))), dtype=np.int64)
     if len(pairs):
         pairs = pairs[:: max(1, int(np.ceil(len(pairs) / max_lines)))]
@@ -162,21 +183,20 @@ def show_registration(
             ],
             axis=1,
         )
-        lines.append(
-            server.scene.add_line_segments(
-                "/correspondences", ends.astype(np.float32), (214, 39, 40), thickness=size / 4
-            )
+        handle = server.scene.add_line_segments(
+            "/correspondences", ends.astype(np.float32), (148, 103, 189), thickness=size / 4
         )
-    server.gui.add_markdown(_summary(result, len(pairs)))
+        toggles.append(("inlier correspondences", handle, False))
+    server.gui.add_markdown(_summary(result, len(pairs), step))
     _toggle(server, "source (as given)", [handles["source"]], initial=False)
     _toggle(server, "target", [handles["target"]])
     _toggle(server, "aligned source", [handles["aligned"]])
-    if lines:
-        _toggle(server, "inlier correspondences", lines, initial=False)
+    for label, handle, initial in toggles:
+        _toggle(server, label, [handle], initial=initial)
     return _serve(server, block)
 
 
-def _summary(result, n_lines: int) -> str:
+def _summary(result, n_lines: int, step=None) -> str:
     rows = ["**Registration**", ""]
     for label, attr, fmt in (
         ("fitness", "fitness", "{:.3f}"),
@@ -189,8 +209,11 @@ def _summary(result, n_lines: int) -> str:
     ):
         if hasattr(result, attr):
             rows.append(f"- {label}: {fmt.format(getattr(result, attr))}")
-    for step in getattr(result, "steps", []):
-        rows.append(f"- step {step.name}: fitness {step.fitness:.3f}, {step.seconds:.2f} s")
+    for each in getattr(result, "steps", []):
+        rows.append(f"- step {each.name}: fitness {each.fitness:.3f}, {each.seconds:.2f} s")
+    if step is not None:
+        kept = int(np.asarray(step.match_inliers).sum())
+        rows.append(f"- global step: {kept} of {len(step.matches)} matches kept")
     if n_lines:
         rows.append(f"- {n_lines} inlier correspondences drawn")
     return "\n".join(rows)

@@ -42,7 +42,8 @@ def main() -> None:
             page = browser.new_page(viewport={"width": 1200, "height": 750})
             page.goto("http://127.0.0.1:8765")
             page.wait_for_selector("canvas")
-            page.get_by_role("checkbox").nth(3).click()  # the inlier correspondences
+            page.get_by_role("checkbox").nth(0).click()  # the source as given
+            page.get_by_role("checkbox").nth(3).click()  # the matches the global step kept
             page.wait_for_timeout(3000)
             notice = page.get_by_text("Software WebGL rendering detected")
             if notice.count():  # a headless browser renders without a GPU: close the notice

@@ -23,6 +23,7 @@ from o3d_rpointhop.poses import (
     write_poses,
 )
 from o3d_rpointhop.registration import MultiwayResult
+from o3d_rpointhop.transforms import apply_transform
 
 POSES = [motion_matrix(*random_motion(seed, 3.0)) for seed in range(4)]
 
@@ -212,3 +213,30 @@ def test_evaluate_and_pose_outputs_from_the_command_line(tmp_path, capsys, multi
     for pose, written in zip(saved.poses, trajectory, strict=True):
         np.testing.assert_allclose(written, pose, atol=1e-7)
     assert len(read_pose_graph(tmp_path / "g.json").nodes) == 3
+
+
+def test_global_steps_keep_their_matches_in_the_caller_s_coordinates(tmp_path):
+    """The global step's descriptor matches come back as point pairs of the clouds as
+    given (far from the origin too), and the ones its estimate explains are marked."""
+    target = make_object(1500, shape_seed=5, sample_seed=1) + [1000.0, -500.0, 20.0]
+    rot, shift = random_motion(2, 0.2)
+    source = (make_object(1500, shape_seed=5, sample_seed=2) + [1000.0, -500.0, 20.0]) @ rot.T
+    result = register(source, target)
+    step = result.steps[0]
+    assert step.matches.shape == (step.info["candidate_matches"], 2, 3)
+    # Every matched source point is a point near the source cloud, every target point
+    # near the target (the global clouds are downsampled from them).
+    from scipy.spatial import cKDTree
+
+    res = result.voxel_size
+    assert cKDTree(source).query(step.matches[:, 0])[0].max() < 2 * res
+    assert cKDTree(target).query(step.matches[:, 1])[0].max() < 2 * res
+    moved = apply_transform(step.matches[:, 0], step.transformation)
+    near = np.linalg.norm(moved - step.matches[:, 1], axis=1) < step.distance
+    np.testing.assert_array_equal(step.match_inliers, near)
+    assert step.match_inliers.sum() == step.info["inlier_matches"]
+    result.save(tmp_path / "r.json")
+    back = RegistrationResult.load(tmp_path / "r.json").steps[0]
+    np.testing.assert_array_equal(back.matches, step.matches)
+    np.testing.assert_array_equal(back.match_inliers, step.match_inliers)
+    assert result.steps[1].matches is None  # ICP matches no descriptors

@@ -79,6 +79,11 @@ class StepResult:
         Step-specific numbers (distances used, number of candidate matches, ...).
     distance : float
         The correspondence distance ``fitness`` and ``inlier_rmse`` were measured at.
+    matches : ndarray of shape (m, 2, 3) or None
+        Global steps that match descriptors: every match the step was given, as (source
+        point, target point) in the caller's coordinates; ``None`` for other steps.
+    match_inliers : ndarray of shape (m,) or None
+        Which of ``matches`` the step's estimate explains (within ``distance``).
     """
 
     name: str
@@ -89,6 +94,8 @@ class StepResult:
     seconds: float = 0.0
     info: dict = field(default_factory=dict)
     distance: float = 0.0
+    matches: np.ndarray | None = None
+    match_inliers: np.ndarray | None = None
 
     def as_dict(self) -> dict:
         return {
@@ -103,7 +110,12 @@ class StepResult:
         }
 
     def _full(self) -> dict:
-        return {**self.as_dict(), "correspondence_set": self.correspondence_set}
+        return {
+            **self.as_dict(),
+            "correspondence_set": self.correspondence_set,
+            "matches": self.matches,
+            "match_inliers": self.match_inliers,
+        }
 
     @classmethod
     def _from_full(cls, body: dict) -> StepResult:
@@ -116,6 +128,12 @@ class StepResult:
             seconds=float(body["seconds"]),
             info=dict(body["info"]),
             distance=float(body["distance"]),
+            matches=None
+            if body.get("matches") is None
+            else np.asarray(body["matches"], dtype=np.float64).reshape(-1, 2, 3),
+            match_inliers=None
+            if body.get("match_inliers") is None
+            else np.asarray(body["match_inliers"], dtype=bool),
         )
 
     @classmethod

@@ -79,6 +79,8 @@ def test_a_pair_registration_is_drawn_with_its_panel_and_toggles(browser):
             "fitness",
             "converged: True",
             "aligned source",
+            "global step: matches it kept",
+            "global step: other matches",
             "inlier correspondences",
         ):
             page.get_by_text(label, exact=False).first.wait_for(timeout=30_000)

@@ -68,4 +68,11 @@ class GlobalStep(RegistrationStep):
             **info,
             "max_correspondence_distance": distance,
         }
+        # The matches themselves, in the caller's coordinates, and which of them the
+        # estimate explains (for looking at a result: o3d_rpointhop.viewer).
+        src, tgt = (np.asarray(c.points) for c in context.clouds("global"))
+        a, b = src[corr.pairs[:, 0]], tgt[corr.pairs[:, 1]]
+        moved = a @ transformation[:3, :3].T + transformation[:3, 3]
+        check.match_inliers = ((moved - b) ** 2).sum(axis=1) < distance * distance
+        check.matches = np.stack([a, b], axis=1) + context.origin
         return check
