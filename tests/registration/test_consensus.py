@@ -201,3 +201,36 @@ def test_the_cap_keeps_matches_spread_by_index_or_the_closest_descriptors(cap):
         np.testing.assert_array_equal(kept.pairs[:, 0], np.linspace(0, 399, 100).astype(int))
     else:
         assert kept.distances.max() <= np.sort(everything.distances)[99]
+
+
+def test_the_weighted_refit_weights_each_match_by_its_truncated_quadratic():
+    """``weighted_refit``: every match within the threshold is weighted 1 - r^2 / tau^2
+    (outside: 0), and the fit is the weighted Kabsch fit with those weights."""
+    from o3d_rpointhop.registration.steps._consensus import _weighted_fit
+    from o3d_rpointhop.transforms import rigid_transforms
+
+    source, target, truth, true = synthetic_matches(300, 0.5, seed=11, noise=0.004)
+    tau2 = 0.01**2
+    moved = apply_transform(source, truth)
+    r2 = ((moved - target) ** 2).sum(axis=1)
+    weight = np.clip(1 - r2 / tau2, 0, None)
+    inside = weight > 0
+    rot, shift = rigid_transforms(source[inside][None], target[inside][None], weight[inside][None])
+    found = _weighted_fit(source, target, truth, tau2)
+    np.testing.assert_allclose(found[:3, :3], rot[0], atol=1e-12)
+    np.testing.assert_allclose(found[:3, 3], shift[0], atol=1e-12)
+    plain = rigid_transforms(source[inside][None], target[inside][None])
+    assert not np.allclose(found[:3, 3], plain[1][0], atol=1e-9)  # the weights matter
+    both = [
+        consensus(
+            source,
+            target,
+            compatibility_threshold=0.02,
+            inlier_threshold=0.01,
+            score_threshold=0.015,
+            weighted_refit=w,
+        ).transformation
+        for w in (False, True)
+    ]
+    assert all(rotation_error_deg(t, truth) < 0.5 for t in both)
+    assert not np.array_equal(both[0], both[1])
