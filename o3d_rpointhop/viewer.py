@@ -160,14 +160,14 @@ def show_registration(
     if step is not None and len(step.matches):  # the global step's descriptor matches
         ends = step.matches - origin
         inside = np.asarray(step.match_inliers, dtype=bool)
-        for label, keep, colour, shown in (
-            ("global step: matches it kept", inside, (44, 160, 44), True),
-            ("global step: other matches", ~inside, (214, 39, 40), False),
+        for label, keep, colour, node in (
+            ("global step: matches it kept", inside, (44, 160, 44), "/matches_kept"),
+            ("global step: other matches", ~inside, (214, 39, 40), "/matches_other"),
         ):
             chosen = ends[keep][:: max(1, int(np.ceil(keep.sum() / max_lines)))]
             if len(chosen):
                 handle = server.scene.add_line_segments(
-                    f"/matches_{'kept' if shown else 'other'}",
+                    node,
                     chosen.astype(np.float32),
                     colour,
                     thickness=size / 4,
@@ -215,7 +215,7 @@ def _summary(result, n_lines: int, step=None) -> str:
         kept = int(np.asarray(step.match_inliers).sum())
         rows.append(f"- global step: {kept} of {len(step.matches)} matches kept")
     if n_lines:
-        rows.append(f"- {n_lines} inlier correspondences drawn")
+        rows.append(f"- {n_lines} inlier correspondences to draw")
     return "\n".join(rows)
 
 
