@@ -413,14 +413,17 @@ class RPointHopTransformer(BaseDescriptor):
             ``"modelnet40"``: paper object settings, fitted on a ModelNet40 train subset
             (144 shapes, 1024 random points each); see ``docs/model_card.md``.
             ``"scene"``: the paper's scene attributes (normals and eigenvalue features),
-            fitted on 3DMatch fragments of four scenes, named in its
-            ``training_scenes_``; made by ``scripts/fit_scene_model.py``.
+            one hop of 96 neighbours, fitted with frames facing the sensor on 3DMatch
+            fragments of four scenes, named in its ``training_scenes_``; made by
+            ``scripts/fit_scene_model.py``. Describe with ``viewpoints`` (see
+            ``docs/model_card.md``).
         n_components : int, None or "default", default="default"
-            ``None``: the full descriptor (1624-D for ``"modelnet40"``, 880-D for
-            ``"scene"``). An int up to 128: the descriptor's projection on that many
-            principal axes, fitted on the same training data. ``"default"``: the model's
-            own choice (``PRETRAINED_COMPONENTS``): the full paper descriptor for
-            ``"modelnet40"``, the 128 axes every scene result was measured with for
+            ``None``: the full descriptor (1624-D for ``"modelnet40"``, 104-D for
+            ``"scene"``). An int up to the axes the file holds (128 for
+            ``"modelnet40"``, 96 for ``"scene"``): the descriptor's projection on that
+            many principal axes, fitted on the same training data. ``"default"``: the
+            model's own choice (``PRETRAINED_COMPONENTS``): the full paper descriptor
+            for ``"modelnet40"``, the 96 axes every scene result was measured with for
             ``"scene"``.
 
         Returns
