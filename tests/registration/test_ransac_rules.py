@@ -85,3 +85,59 @@ def test_verification_prefers_the_whole_clouds_fit_over_the_match_count():
     assert rotation_error_deg(by_matches.transformation, decoy) < 1e-4
     by_clouds = ransac(source, target, 0.01, clouds=(cloud, moved), **kwargs)
     assert rotation_error_deg(by_clouds.transformation, truth) < 1e-4
+
+
+def test_the_refits_are_least_squares_fits_on_the_inliers():
+    """From a slightly wrong hypothesis, the refit on the matches is the least-squares
+    fit on the true matches (the only ones within the threshold), and the refit on the
+    clouds the least-squares fit on their nearest-neighbour pairs."""
+    from scipy.spatial import cKDTree
+
+    from o3d_rpointhop.registration.steps._ransac import _refit_on_clouds, _refit_on_matches
+    from o3d_rpointhop.transforms import rigid_transform
+
+    rng = np.random.default_rng(8)
+    truth = motion_matrix(*random_motion(5, 0.4))
+    source = rng.uniform(-1, 1, (400, 3))
+    target = apply_transform(source, truth) + rng.normal(scale=0.002, size=(400, 3))
+    target[300:] = rng.uniform(-5, 5, (100, 3))  # outliers
+    start = truth.copy()
+    start[:3, 3] += [0.003, -0.002, 0.0]
+    planes = np.ascontiguousarray(source.T), np.ascontiguousarray(target.T)
+    found = _refit_on_matches(start, planes, 0.02**2, source, target)
+    expected = rigid_transform(source[:300], target[:300])
+    np.testing.assert_allclose(found, expected, atol=1e-12)
+
+    cloud = rng.uniform(-1, 1, (300, 3))  # sparse: every nearest neighbour is the partner
+    moved = apply_transform(cloud, truth) + rng.normal(scale=0.001, size=cloud.shape)
+    fitted = _refit_on_clouds(start, (cloud, moved), 0.01, cKDTree(moved))
+    np.testing.assert_allclose(fitted, rigid_transform(cloud, moved), atol=1e-9)
+
+
+def test_verification_ranks_by_fitness_then_rmse_then_order():
+    from scipy.spatial import cKDTree
+
+    from o3d_rpointhop.registration.steps._ransac import _verify
+
+    rng = np.random.default_rng(2)
+    cloud = rng.uniform(-1, 1, (1500, 3))
+    truth = motion_matrix(*random_motion(6, 0.3))
+    moved = apply_transform(cloud, truth)
+    tree = cKDTree(moved)
+
+    def hypothesis(shift):
+        t = truth.copy()
+        t[:3, 3] += shift
+        return t
+
+    candidates = [
+        hypothesis([0.5, 0, 0]),  # far off: no fitness
+        hypothesis([0.004, 0, 0]),  # every point within 0.01, RMSE 0.004
+        hypothesis([0.001, 0, 0]),  # every point within 0.01, RMSE 0.001: the best
+        hypothesis([0.001, 0, 0]),  # a tie with the one before: the first wins
+        hypothesis([0.009, 0.009, 0]),  # fewer points within 0.01
+    ]
+    rot = np.array([c[:3, :3] for c in candidates])
+    shift = np.array([c[:3, 3] for c in candidates])
+    assert _verify(rot, shift, (cloud, moved), 0.01, tree) == 2
+    assert _verify(rot[[0, 4, 1]], shift[[0, 4, 1]], (cloud, moved), 0.01, tree) == 2
