@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 
 __all__ = [
     "POSE_FORMATS",
+    "log_records",
     "read_matrix",
     "read_poses",
     "read_pose_graph",
@@ -81,6 +82,28 @@ def _rows(path: Path, width: int) -> np.ndarray:
     if not rows:
         raise ValueError(f"{path}: no poses in this file")
     return np.asarray(rows)
+
+
+def log_records(path: str | os.PathLike, size: int) -> dict[tuple[int, int], np.ndarray]:
+    """The records of a 3DMatch ``.log`` / ``.info`` file (Choi et al.'s layout): a
+    header line ``i j n`` followed by a ``size`` x ``size`` matrix, by ``(i, j)``;
+    ValueError naming the first record that is not one."""
+    lines = [ln.split() for ln in Path(path).read_text().splitlines() if ln.strip()]
+    if len(lines) % (size + 1):
+        raise ValueError(f"{path}: expected records of {size + 1} lines, got {len(lines)} lines")
+    out = {}
+    for k in range(0, len(lines), size + 1):
+        rows = lines[k + 1 : k + 1 + size]
+        try:
+            if len(lines[k]) < 2 or any(len(row) != size for row in rows):
+                raise ValueError
+            i, j = int(lines[k][0]), int(lines[k][1])
+            out[(i, j)] = np.array([[float(v) for v in row] for row in rows])
+        except ValueError:
+            raise ValueError(
+                f"{path}, record {k // (size + 1)}: not a header and a {size} x {size} matrix"
+            ) from None
+    return out
 
 
 def write_poses(
@@ -165,18 +188,13 @@ def read_poses(
             pose[:3, 3] = r[1:4]
             poses.append(pose)
     elif format == "3dmatch":
-        lines = [ln.split() for ln in path.read_text().splitlines() if ln.strip()]
-        if not lines or len(lines) % 5:
-            raise ValueError(f"{path}: expected records of 5 lines, got {len(lines)} lines")
-        out = {}
-        for k in range(0, len(lines), 5):
-            try:
-                i, j = int(lines[k][0]), int(lines[k][1])
-                pose = np.array([[float(v) for v in row] for row in lines[k + 1 : k + 5]])
-            except (ValueError, IndexError):
-                raise ValueError(f"{path}, record {k // 5}: not a pose record") from None
-            out[(i, j)] = _check_pose(pose, f"{path}, record {k // 5}")
-        return out
+        records = log_records(path, 4)
+        if not records:
+            raise ValueError(f"{path}: no poses in this file")
+        return {
+            ij: _check_pose(pose, f"{path}, record {k}")
+            for k, (ij, pose) in enumerate(records.items())
+        }
     else:
         raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
     return [_check_pose(p, f"{path}, pose {k}") for k, p in enumerate(poses)]

@@ -70,6 +70,9 @@ def test_bad_pose_files_and_poses_are_refused(tmp_path):
     mirror = np.diag([1.0, 1.0, -1.0, 1.0])
     with pytest.raises(ValueError, match="not a rigid"):
         write_matrix(tmp_path / "m.txt", mirror)
+    (tmp_path / "bad.log").write_text("0 1 2\n1 0 0 0\n0 1 0\n0 0 1 0\n0 0 0 1\n")
+    with pytest.raises(ValueError, match="record 0: not a header and a 4 x 4 matrix"):
+        read_poses(tmp_path / "bad.log", "3dmatch")
     with pytest.raises(ValueError, match="format must be one of"):
         write_poses(tmp_path / "x.txt", POSES, "g2o")
     with pytest.raises(FileNotFoundError):

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..poses import log_records
 from ._paths import data_home
 
 __all__ = ["FragmentPair", "load_3dmatch_pairs", "read_gt_log", "read_gt_info", "threedmatch_root"]
@@ -43,26 +44,14 @@ class FragmentPair:
     overlap: float | None = None
 
 
-def _read_records(path, size: int) -> dict[tuple[int, int], np.ndarray]:
-    """Records of a header line ``i j n`` followed by a ``size`` x ``size`` matrix."""
-    lines = [ln.split() for ln in Path(path).read_text().splitlines() if ln.strip()]
-    if len(lines) % (size + 1):
-        raise ValueError(f"{path}: expected records of {size + 1} lines, got {len(lines)} lines")
-    out = {}
-    for k in range(0, len(lines), size + 1):
-        i, j = int(lines[k][0]), int(lines[k][1])
-        out[(i, j)] = np.array([[float(v) for v in row] for row in lines[k + 1 : k + 1 + size]])
-    return out
-
-
 def read_gt_log(path: str | os.PathLike) -> dict[tuple[int, int], np.ndarray]:
     """``gt.log``: per pair ``(i, j)``, the 4x4 matrix mapping fragment j into i."""
-    return _read_records(path, 4)
+    return log_records(path, 4)
 
 
 def read_gt_info(path: str | os.PathLike) -> dict[tuple[int, int], np.ndarray]:
     """``gt.info``: per pair ``(i, j)``, the 6x6 information matrix."""
-    return _read_records(path, 6)
+    return log_records(path, 6)
 
 
 def threedmatch_root(data_dir: str | os.PathLike | None = None) -> Path:
