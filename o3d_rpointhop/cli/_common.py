@@ -100,16 +100,30 @@ def add_descriptor(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _xyz(text: str) -> list[float] | None:
+    """``"x,y,z"`` as three floats, or None."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        return None
+    return values if len(values) == 3 else None
+
+
+def vector(text: str) -> list[float]:
+    """An argparse type: one direction or position ``x,y,z``."""
+    values = _xyz(text)
+    if values is None:
+        raise argparse.ArgumentTypeError(f"expected 'x,y,z', got {text!r}")
+    return values
+
+
 def _viewpoints(text: str):
     """``--viewpoints``: ``origin``, or one or more positions ``x,y,z`` separated by
     ``;`` (one per cloud, in that cloud's coordinates)."""
     if text == "origin":
         return text
-    try:
-        views = [[float(v) for v in part.split(",")] for part in text.split(";")]
-    except ValueError:
-        views = []
-    if not views or any(len(v) != 3 for v in views):
+    views = [_xyz(part) for part in text.split(";")]
+    if any(v is None for v in views):
         raise argparse.ArgumentTypeError(
             f"expected 'origin' or positions 'x,y,z;x,y,z', got {text!r}"
         )

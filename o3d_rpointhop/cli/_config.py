@@ -59,8 +59,7 @@ def default_config() -> dict[str, dict[str, Any]]:
     return config
 
 
-def _merge(config: dict, section: str, key: str, value: Any, where: str) -> None:
-    defaults = default_config()
+def _merge(config: dict, defaults: dict, section: str, key: str, value: Any, where: str) -> None:
     if section not in defaults:
         raise CommandError(f"{where}: unknown section [{section}]; sections: {', '.join(defaults)}")
     if key not in defaults[section]:
@@ -77,6 +76,7 @@ def load_config(path: str | None, sets: list[str] | None = None) -> dict[str, di
     """The values a config file and ``--set`` items give, checked against the known
     sections and parameters (values are checked by the steps themselves)."""
     config: dict[str, dict] = {}
+    defaults = default_config()
     if path:
         try:
             data = tomllib.loads(Path(path).read_text())
@@ -88,7 +88,7 @@ def load_config(path: str | None, sets: list[str] | None = None) -> dict[str, di
             if not isinstance(values, dict):
                 raise CommandError(f"{path}: {section!r} must be a [section], not a value")
             for key, value in values.items():
-                _merge(config, section, key, value, path)
+                _merge(config, defaults, section, key, value, path)
     for item in sets or []:
         name, sep, text = item.partition("=")
         section, dot, key = name.strip().partition(".")
@@ -98,7 +98,7 @@ def load_config(path: str | None, sets: list[str] | None = None) -> dict[str, di
             value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:
             value = text.strip()
-        _merge(config, section, key.strip(), value, "--set")
+        _merge(config, defaults, section, key.strip(), value, "--set")
     return config
 
 

@@ -23,6 +23,7 @@ from ._common import (
     cloud_bytes,
     descriptor_of,
     flag_status,
+    vector,
 )
 from ._config import load_config, registration_options
 from .view import add_view
@@ -77,7 +78,7 @@ def add_parser(commands) -> None:
     add_viewpoints(p, "cloud (source first)")
     p.add_argument(
         "--up",
-        type=_vector,
+        type=vector,
         help="an up direction both clouds share, 'x,y,z' (LiDAR: 0,0,1): the global step "
         "rejects upside-down hypotheses (default: none)",
     )
@@ -94,16 +95,6 @@ def add_parser(commands) -> None:
     add_force(p)
     add_view(p)
     p.set_defaults(func=run)
-
-
-def _vector(text: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expected 'x,y,z', got {text!r}")
-    return values
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,16 +4,13 @@ this library's resolution and flags."""
 from __future__ import annotations
 
 import time
-from numbers import Real
 from typing import Any
-
-import numpy as np
 
 from .context import RegistrationContext
 from .pipeline import _check_transformation
 from .quality import assess
 from .result import RegistrationResult, StepResult
-from .settings import RegistrationSettings
+from .settings import RegistrationSettings, _positive
 
 __all__ = ["evaluate"]
 
@@ -67,12 +64,7 @@ def evaluate(
     """
     start = time.perf_counter()
     matrix = _check_transformation(transformation)
-    if distance is not None and (
-        isinstance(distance, bool)
-        or not isinstance(distance, Real)
-        or not np.isfinite(distance)
-        or distance <= 0
-    ):
+    if distance is not None and not _positive(distance):
         raise ValueError(f"distance must be a positive number, got {distance!r}")
     context = RegistrationContext(source, target, voxel_size=voxel_size, settings=settings)
     distance = float(distance or context.settings.evaluation_distance)
