@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from .open3d_interop import to_point_cloud
-from .registration.multiway import SCAN_COLOURS
+from .registration.result import SCAN_COLOURS
 
 __all__ = ["DISPLAY_POINTS", "show_multiway", "show_registration"]
 

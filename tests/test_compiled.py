@@ -65,3 +65,27 @@ def test_threads_restores_the_callers_setting():
     with compiled.threads(1):
         assert numba.get_num_threads() == 1
     assert numba.get_num_threads() == before
+
+
+def _popcounts(words):  # pragma: no cover - compiled
+    out = np.empty(words.shape[0], dtype=np.int64)
+    for i in range(words.shape[0]):
+        out[i] = popcount(words[i])
+    return out
+
+
+popcount = compiled.popcount  # bound to the processor's instruction when compiled
+
+
+def test_popcount_counts_the_set_bits_of_a_word():
+    rng = np.random.default_rng(0)
+    words = np.concatenate(
+        [
+            np.array([0, 1, 2**63, 2**64 - 1], dtype=np.uint64),
+            rng.integers(0, 2**63, 200, dtype=np.uint64) * np.uint64(2) + np.uint64(1),
+        ]
+    )
+    expected = np.array([int(w).bit_count() for w in words])
+    assert [compiled.popcount(int(w)) for w in words[:4]] == [0, 1, 1, 64]
+    kernel = compiled.kernel()(_popcounts)
+    np.testing.assert_array_equal(kernel(words), expected)

@@ -107,7 +107,7 @@ def test_symmetry_check_puts_right_the_turned_over_shapes_of_the_noisy_protocol(
     from that turned-over pose, ICP alone stays there; the symmetry check puts it right."""
     from o3d_rpointhop import register
     from o3d_rpointhop.evaluation.protocols import make_pairs
-    from o3d_rpointhop.registration.quality import twin_transformations
+    from o3d_rpointhop.registration.flags import twin_transformations
     from o3d_rpointhop.transforms import rotation_error_deg
 
     _, test = modelnet

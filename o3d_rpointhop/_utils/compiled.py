@@ -20,13 +20,45 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["kernel", "prange", "threads"]
+__all__ = ["kernel", "popcount", "prange", "threads"]
 
 _LOCK = threading.Lock()
 
 #: ``numba.prange`` inside a kernel: a kernel module imports this name, and compiling
 #: binds it to numba's parallel range (``range`` until then: numba is not imported).
 prange = range
+
+
+def popcount(word: int) -> int:
+    """The number of set bits of an unsigned 64-bit word. Inside a kernel, compiling
+    binds this name to the processor's population count (LLVM's ``ctpop``)."""
+    return int(word).bit_count()
+
+
+_POPCOUNT: Any = None
+
+
+def _popcount_intrinsic(numba) -> Any:
+    """``popcount`` as a numba intrinsic: one ``llvm.ctpop.i64`` on a uint64, typed as
+    int64 (so that sums of counts stay integers)."""
+    global _POPCOUNT
+    if _POPCOUNT is None:
+        from numba.core import types
+        from numba.extending import intrinsic
+
+        @intrinsic
+        def _ctpop(typingctx, word):
+            if word != types.uint64:
+                return None
+
+            def codegen(context, builder, signature, args):
+                function = builder.module.declare_intrinsic("llvm.ctpop", [args[0].type])
+                return builder.call(function, args)
+
+            return types.int64(types.uint64), codegen
+
+        _POPCOUNT = _ctpop
+    return _POPCOUNT
 
 
 class _Kernel:
@@ -44,8 +76,11 @@ class _Kernel:
             with _LOCK:
                 if self.compiled is None:
                     numba = _numba()
-                    if "prange" in self.function.__globals__:
-                        self.function.__globals__["prange"] = numba.prange
+                    names = self.function.__globals__
+                    if "prange" in names:
+                        names["prange"] = numba.prange
+                    if "popcount" in names:
+                        names["popcount"] = _popcount_intrinsic(numba)
                     try:
                         compiled = numba.njit(cache=True, **self.options)(self.function)
                     except RuntimeError as exc:

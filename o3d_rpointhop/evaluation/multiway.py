@@ -21,12 +21,10 @@ from scipy.spatial.transform import Rotation
 
 from ..descriptors import FPFHTransformer
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
-from ..registration.multiway import (
-    MultiwayResult,
-    common_voxel,
-    optimise_pose_graph,
-    register_multiway,
-)
+from ..registration.multiway import register_multiway
+from ..registration.pose_graph import optimise_pose_graph
+from ..registration.prepared import common_voxel
+from ..registration.result import MultiwayResult
 from ..transforms import apply_transform, rotation_error_deg
 from .methods import feature_ransac, fpfh_recipe_cloud
 

@@ -4,19 +4,19 @@ Modules, one concept each: :mod:`.defaults` (the descriptor and global cloud siz
 when none is given), :mod:`.settings` (the resolution and every distance derived from
 it), :mod:`.context` (the clouds and caches one registration shares),
 :mod:`.correspondences` (descriptor matches), :mod:`.result` (what a registration
-returns), :mod:`.quality` (refused input and the result's flags), the steps in
+returns), :mod:`.checks` (refused input), :mod:`.flags` (the result's flags), the steps in
 :mod:`.steps`, :mod:`.pipeline` (chains and ``register``), :mod:`.evaluate` (scoring a given
 transformation), :mod:`.scoring` (recall for
 model selection) and :mod:`.multiway` (pose graphs over many scans).
 """
 
+from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .correspondences import Correspondences, find_correspondences
 from .evaluate import evaluate
-from .multiway import MultiwayResult, register_multiway
+from .multiway import register_multiway
 from .pipeline import RegistrationPipeline, register
-from .quality import RegistrationWarning
-from .result import RegistrationResult, StepResult
+from .result import MultiwayResult, RegistrationResult, StepResult
 from .scoring import registration_recall, registration_scorer
 from .settings import RegistrationSettings
 from .steps import (

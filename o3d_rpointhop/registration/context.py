@@ -17,14 +17,18 @@ from .._utils.geometry import point_spacing
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_viewpoints
 from ..open3d_interop import to_point_cloud
-from .defaults import DEFAULT_GLOBAL_POINTS, resolve_global_points
-from .quality import check_geometry
+from .checks import check_geometry
+from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
+from .prepared import PreparedCloud
 from .result import StepResult
 from .settings import RegistrationSettings, resolve_voxel_size
 
 __all__ = ["RegistrationContext", "global_points"]
 
 reg = o3d.pipelines.registration
+
+#: The key of the context's own descriptor's features.
+_OWN = "own"
 
 
 class RegistrationContext:
@@ -36,27 +40,29 @@ class RegistrationContext:
         Copied: the caller's objects are never modified.
     voxel_size : float or "auto"
         See :func:`~o3d_rpointhop.registration.settings.resolve_voxel_size`; with
-        ``global_clouds``, ``"auto"`` is the larger of their point spacings.
+        ``prepared``, ``"auto"`` is the larger of their point spacings.
     n_global_points : int or "auto"
         Size the global step aims for when it downsamples; see
         :func:`~o3d_rpointhop.registration.defaults.resolve_global_points`.
     seed : int
         Seeds every random choice (RANSAC, FGR, consensus).
     descriptor : transformer or None
-        Descriptor used by global steps that do not name their own.
+        Descriptor used by global steps that do not name their own; ``None``:
+        :func:`~o3d_rpointhop.registration.defaults.default_descriptor`, loaded when a
+        step first needs it.
     check : bool, default=True
         Refuse clouds without extent or on one line, and warn about planar ones
-        (:func:`~o3d_rpointhop.registration.quality.check_geometry`).
+        (:func:`~o3d_rpointhop.registration.checks.check_geometry`).
     settings : RegistrationSettings or None
         The multiples of the resolution; ``None`` is ``RegistrationSettings()``.
-    global_clouds : (array-like, array-like), default=None
-        The clouds the global step works on, already prepared (in the caller's
+    prepared : (PreparedCloud, PreparedCloud), default=None
+        The clouds the global step works on, already prepared
+        (:func:`~o3d_rpointhop.registration.prepared.prepare_cloud`, in the caller's
         coordinates, like ``source`` and ``target``), instead of voxel-downsampling
         ``source`` and ``target``: a caller that registers one scan to many prepares it
-        once.
-    features : (array-like, array-like), default=None
-        ``descriptor``'s descriptors of the global clouds (source, target), one row per
-        point, computed once by the caller. Needs ``descriptor``.
+        once. Their descriptors, when they carry them, are the ones a global step
+        without a descriptor of its own matches (the context's ``descriptor`` is then
+        not used for them).
     viewpoints : None, "origin" or (array-like, array-like), default=None
         Where the sensors that saw the source and the target stood, in the caller's
         coordinates of each cloud; ``"origin"``: each cloud is in its sensor's frame.
@@ -100,8 +106,7 @@ class RegistrationContext:
         descriptor: Any = None,
         check: bool = True,
         settings: RegistrationSettings | None = None,
-        global_clouds: tuple[Any, Any] | None = None,
-        features: tuple[Any, Any] | None = None,
+        prepared: tuple[PreparedCloud, PreparedCloud] | None = None,
         viewpoints: Any = None,
         up: Any = None,
     ) -> None:
@@ -123,33 +128,28 @@ class RegistrationContext:
             check_geometry(np.asarray(self.target.points), "target", target)
         self.n_global_points = resolve_global_points(n_global_points, descriptor)
         self._global: dict[str, o3d.geometry.PointCloud] = {}
-        if global_clouds is None:
+        self.descriptor = descriptor
+        # Descriptors by (descriptor id, or _OWN for the context's own, which).
+        self._features: dict[tuple[Any, str], np.ndarray] = {}
+        if prepared is None:
             voxel, self.downsampled = resolve_voxel_size(
                 self.source, self.target, voxel_size, self.n_global_points
             )
         else:
-            for which, cloud in zip(("source", "target"), global_clouds, strict=True):
-                self._global[which] = to_point_cloud(cloud, f"global {which}").translate(
-                    -self.origin
-                )
+            for which, scan in zip(("source", "target"), prepared, strict=True):
+                if not isinstance(scan, PreparedCloud):
+                    raise TypeError(f"prepared clouds must be PreparedCloud, got {type(scan)}")
+                cloud = to_point_cloud(scan.points, f"prepared {which}")
+                if scan.normals is not None:
+                    cloud.normals = o3d.utility.Vector3dVector(scan.normals)
+                self._global[which] = cloud.translate(-self.origin)
+                if scan.features is not None:
+                    self._features[(_OWN, which)] = scan.features
             voxel, self.downsampled = voxel_size, True
             if voxel == "auto":
                 voxel = max(point_spacing(np.asarray(c.points)) for c in self._global.values())
         self.settings = (settings or RegistrationSettings()).at(voxel)
         self.seed = int(seed)
-        self.descriptor = descriptor
-        self._features: dict[tuple[int, str], np.ndarray] = {}
-        if features is not None:
-            if descriptor is None:
-                raise ValueError("features need the descriptor that computed them")
-            for which, values in zip(("source", "target"), features, strict=True):
-                values = np.asarray(values)
-                if len(values) != len(self.global_cloud(which).points):
-                    raise ValueError(
-                        f"{which} features have {len(values)} rows for "
-                        f"{len(self.global_cloud(which).points)} global points"
-                    )
-                self._features[(id(descriptor), which)] = values
         self._normals: dict[tuple, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
 
@@ -218,9 +218,16 @@ class RegistrationContext:
     def features(self, descriptor: Any, which: str) -> np.ndarray:
         """Descriptors of the global cloud, computed once per descriptor object, with the
         distances it leaves to the registration at its resolution (``at_resolution``)
-        and with the viewpoints, if any."""
-        key = (id(descriptor), which)
+        and with the viewpoints, if any. ``descriptor`` None (or the context's own) is
+        the context's: its prepared descriptors when it was given them, else the
+        context's ``descriptor`` (the default one when that is None)."""
+        own = descriptor is None or descriptor is self.descriptor
+        key = (_OWN if own else id(descriptor), which)
         if key not in self._features:
+            if own:
+                if self.descriptor is None:
+                    self.descriptor = default_descriptor()
+                descriptor = self.descriptor
             cloud = self.global_cloud(which)
             # Distances a descriptor leaves to the registration (FPFH's "auto" radii)
             # follow its resolution.

@@ -7,8 +7,8 @@ import time
 from typing import Any
 
 from .context import RegistrationContext
+from .flags import assess
 from .pipeline import _check_transformation
-from .quality import assess
 from .result import RegistrationResult, StepResult
 from .settings import RegistrationSettings, _positive
 

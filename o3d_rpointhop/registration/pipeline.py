@@ -19,9 +19,10 @@ from .._utils.params import (
     StrOptions,
     validate_params,
 )
+from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method
-from .quality import RegistrationWarning, assess, warn_flags
+from .flags import assess, warn_flags
 from .result import RegistrationResult
 from .scoring import check_pairs, registration_scorer
 from .settings import RegistrationSettings

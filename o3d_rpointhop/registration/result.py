@@ -10,8 +10,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import open3d as o3d
 
-__all__ = ["RegistrationResult", "StepResult", "read_json", "write_json"]
+from ..open3d_interop import to_point_cloud
+
+__all__ = [
+    "SCAN_COLOURS",
+    "MultiwayResult",
+    "RegistrationResult",
+    "StepResult",
+    "read_json",
+    "write_json",
+]
+
+reg = o3d.pipelines.registration
 
 #: Format of the files :meth:`RegistrationResult.save` and ``MultiwayResult.save`` write.
 RESULT_FORMAT = 1
@@ -266,3 +278,199 @@ class RegistrationResult:
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
+
+
+#: Colours of the scans in a merged cloud, in scan order (matplotlib's "tab10").
+SCAN_COLOURS = np.array(
+    [
+        [0.12, 0.47, 0.71],
+        [1.0, 0.5, 0.05],
+        [0.17, 0.63, 0.17],
+        [0.84, 0.15, 0.16],
+        [0.58, 0.4, 0.74],
+        [0.55, 0.34, 0.29],
+        [0.89, 0.47, 0.76],
+        [0.5, 0.5, 0.5],
+        [0.74, 0.74, 0.13],
+        [0.09, 0.75, 0.81],
+    ]
+)
+
+
+@dataclass
+class MultiwayResult:
+    """The outcome of :func:`register_multiway`.
+
+    Attributes
+    ----------
+    poses : list of (ndarray of shape (4, 4) or None)
+        ``poses[k]`` maps scan ``k`` into scan 0's frame; ``None`` for an unconnected
+        scan.
+    pose_graph : open3d.pipelines.registration.PoseGraph
+        The optimised graph (nodes: connected scans in order; edges: kept pairs).
+    pairs : dict
+        ``(i, j) -> (transformation, fitness)`` for every candidate pair registered
+        (the transformation maps scan ``j`` into scan ``i``).
+    edges : list of tuple
+        The pairs kept after optimisation, ``(i, j)``.
+    unconnected : list of int
+        Scans no kept edge joins to scan 0 (left out, never placed silently).
+    voxel_size : float
+        The common resolution.
+    seconds : float
+    """
+
+    poses: list
+    pose_graph: Any
+    pairs: dict = field(default_factory=dict)
+    edges: list = field(default_factory=list)
+    unconnected: list = field(default_factory=list)
+    voxel_size: float = 0.0
+    seconds: float = 0.0
+
+    def merge(
+        self,
+        clouds: list[Any],
+        *,
+        voxel_size: float | str | None = "auto",
+        colour: bool = True,
+    ) -> o3d.geometry.PointCloud:
+        """The placed scans in scan 0's frame as one cloud.
+
+        Parameters
+        ----------
+        clouds : list of array-like (n_k, 3) or Open3D point clouds
+            The scans given to :func:`register_multiway`, in the same order.
+        voxel_size : float, "auto" or None, default="auto"
+            Voxel the merged cloud is downsampled to; ``"auto"`` is half the common
+            resolution, ``None`` keeps every point.
+        colour : bool, default=True
+            Paint each scan in its own colour (:data:`SCAN_COLOURS`, in scan order);
+            ``False`` keeps the scans' own colours and normals (turned with them).
+
+        Returns
+        -------
+        open3d.geometry.PointCloud
+            Unconnected scans are left out.
+        """
+        if len(clouds) != len(self.poses):
+            raise ValueError(f"{len(self.poses)} scans were registered, got {len(clouds)}")
+        merged = o3d.geometry.PointCloud()
+        for k, (scan, pose) in enumerate(zip(clouds, self.poses, strict=True)):
+            if pose is None:
+                continue
+            part = o3d.geometry.PointCloud(to_point_cloud(scan, f"clouds[{k}]"))
+            part.transform(pose)  # turns the normals too
+            if colour:
+                part.paint_uniform_color(SCAN_COLOURS[k % len(SCAN_COLOURS)])
+            merged += part
+        if voxel_size is None:
+            return merged
+        return merged.voxel_down_sample(
+            self.voxel_size / 2 if isinstance(voxel_size, str) else float(voxel_size)
+        )
+
+    def mesh(
+        self, clouds: list[Any], *, voxel_size: float | None = None, depth: int = 9
+    ) -> o3d.geometry.TriangleMesh:
+        """A surface through the merged scans: Open3D's screened Poisson reconstruction.
+
+        Normals are estimated within 4 voxels of the merged cloud and oriented
+        consistently over their tangent planes before meshing.
+
+        Parameters
+        ----------
+        clouds : list
+            As in :meth:`merge`.
+        voxel_size : float, default=None
+            Voxel the scans are merged at before meshing; ``None`` is half the common
+            resolution.
+        depth : int, default=9
+            Octree depth of the Poisson solver (detail, and memory).
+
+        Returns
+        -------
+        open3d.geometry.TriangleMesh
+        """
+        voxel = voxel_size or self.voxel_size / 2
+        merged = self.merge(clouds, voxel_size=voxel, colour=False)
+        merged.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=30))
+        merged.orient_normals_consistent_tangent_plane(16)
+        mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(merged, depth=depth)
+        return mesh
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the poses, the candidate pairs, the edges and the optimised pose graph
+        (nodes, edges with their information matrices) to a JSON file that
+        :meth:`load` reads back. (``o3d-rpointhop reconstruct --pose-graph`` writes the
+        graph alone in Open3D's format, for ``open3d.io.read_pose_graph``.)"""
+        graph = self.pose_graph
+        body = {
+            "poses": self.poses,
+            "pairs": [[i, j, t, f] for (i, j), (t, f) in sorted(self.pairs.items())],
+            "edges": [list(e) for e in self.edges],
+            "unconnected": list(self.unconnected),
+            "voxel_size": self.voxel_size,
+            "seconds": self.seconds,
+            "pose_graph": {
+                "nodes": [np.asarray(n.pose) for n in graph.nodes],
+                "edges": [
+                    {
+                        "source": int(e.source_node_id),
+                        "target": int(e.target_node_id),
+                        "transformation": np.asarray(e.transformation),
+                        "information": np.asarray(e.information),
+                        "uncertain": bool(e.uncertain),
+                        "confidence": float(e.confidence),
+                    }
+                    for e in graph.edges
+                ],
+            },
+        }
+        write_json(path, "MultiwayResult", body)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MultiwayResult:
+        """A result :meth:`save` wrote; ValueError for any other file."""
+        body = read_json(path, "MultiwayResult")
+        try:
+            graph = reg.PoseGraph()
+            for pose in body["pose_graph"]["nodes"]:
+                graph.nodes.append(reg.PoseGraphNode(_matrix(pose, (4, 4), f"{path}")))
+            for e in body["pose_graph"]["edges"]:
+                edge = reg.PoseGraphEdge(
+                    int(e["source"]),
+                    int(e["target"]),
+                    _matrix(e["transformation"], (4, 4), f"{path}"),
+                    _matrix(e["information"], (6, 6), f"{path}"),
+                    uncertain=bool(e["uncertain"]),
+                    confidence=float(e["confidence"]),
+                )
+                graph.edges.append(edge)
+            return cls(
+                poses=[None if p is None else _matrix(p, (4, 4), f"{path}") for p in body["poses"]],
+                pose_graph=graph,
+                pairs={
+                    (int(i), int(j)): (_matrix(t, (4, 4), f"{path}"), float(f))
+                    for i, j, t, f in body["pairs"]
+                },
+                edges=[tuple(int(v) for v in e) for e in body["edges"]],
+                unconnected=[int(k) for k in body["unconnected"]],
+                voxel_size=float(body["voxel_size"]),
+                seconds=float(body["seconds"]),
+            )
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
+
+    def as_dict(self, names: list[str] | None = None) -> dict:
+        """JSON-ready poses, edges and flags, scans called by ``names`` (default: their
+        indices)."""
+        names = names or [str(k) for k in range(len(self.poses))]
+        return {
+            "scans": list(names),
+            "poses": [None if p is None else p.tolist() for p in self.poses],
+            "unconnected": [names[k] for k in self.unconnected],
+            "edges": [[names[i], names[j]] for i, j in self.edges],
+            "voxel_size": self.voxel_size,
+            "seconds": self.seconds,
+        }

@@ -180,6 +180,7 @@ def test_seed_suppression_keeps_the_best_seed_of_a_neighbourhood():
 @pytest.mark.parametrize("cap", ["index", "distance"])
 def test_the_cap_keeps_matches_spread_by_index_or_the_closest_descriptors(cap):
     from o3d_rpointhop.registration.context import RegistrationContext
+    from o3d_rpointhop.registration.prepared import PreparedCloud
 
     rng = np.random.default_rng(0)
     cloud = rng.uniform(-1, 1, (400, 3))
@@ -190,9 +191,7 @@ def test_the_cap_keeps_matches_spread_by_index_or_the_closest_descriptors(cap):
         cloud,
         cloud,
         voxel_size=0.05,
-        global_clouds=(cloud, cloud),
-        features=(features, noisy),
-        descriptor="given",  # stands for whatever computed the features
+        prepared=(PreparedCloud(cloud, features), PreparedCloud(cloud, noisy)),
     )
     everything = ConsensusGlobal(both_directions=False, max_matches=400)._matches(context)
     kept = step._matches(context)
@@ -234,3 +233,58 @@ def test_the_weighted_refit_weights_each_match_by_its_truncated_quadratic():
     ]
     assert all(rotation_error_deg(t, truth) < 0.5 for t in both)
     assert not np.array_equal(both[0], both[1])
+
+
+def _reference_graphs(source, target, threshold, second, min_span, ends):
+    """The two compatibility graphs, dense, in numpy."""
+    ds = np.linalg.norm(source[:, None] - source[None], axis=2)
+    dt = np.linalg.norm(target[:, None] - target[None], axis=2)
+    keep = (ds + dt >= min_span) & (ends[0][:, None] != ends[0][None])
+    keep &= ends[1][:, None] != ends[1][None]
+    gap = np.abs(ds - dt)
+    return keep & (gap < threshold), keep & (gap < second)
+
+
+@pytest.mark.parametrize("m", [5, 64, 130])
+def test_the_kernels_match_a_dense_numpy_reference(m):
+    """Graph bits, degrees, the seeds' best partners by common neighbours (ties to the
+    lower index) and the truncated scores, against plain numpy on dense matrices."""
+    from o3d_rpointhop.registration.steps._consensus import (
+        _bits,
+        _consensus_sets,
+        _truncated_scores,
+    )
+
+    rng = np.random.default_rng(m)
+    source, target, _, _ = synthetic_matches(m, 0.5, seed=m, noise=0.01)
+    ends = (rng.integers(0, m, m), rng.integers(0, m, m))
+    first, second = _reference_graphs(source, target, 0.1, 0.05, 0.2, ends)
+    bits, bits2, degree = _bits(source, target, 0.1, 0.05, 0.2, ends)
+    unpack = lambda b: np.unpackbits(b.view(np.uint8), axis=1, bitorder="little")[:, :m]  # noqa: E731
+    np.testing.assert_array_equal(unpack(bits).astype(bool), first)
+    np.testing.assert_array_equal(unpack(bits2).astype(bool), second)
+    np.testing.assert_array_equal(degree, first.sum(axis=1))
+
+    seeds = np.arange(0, m, 2, dtype=np.int64)
+    k = min(4, m - 1)
+    members, scores = _consensus_sets(bits, bits2, seeds, k)
+    shared = second.astype(np.int64) @ second.astype(np.int64)
+    for s, i in enumerate(seeds):
+        partners = np.flatnonzero(first[i])
+        order = partners[np.argsort(-shared[i, partners], kind="stable")][:k]
+        padded = np.r_[order, np.full(k - len(order), i)]
+        np.testing.assert_array_equal(members[s], padded)
+        np.testing.assert_array_equal(scores[s][: len(order)], shared[i, order])
+        assert not scores[s][len(order) :].any()
+
+    rot = np.stack([np.eye(3), np.diag([1.0, -1.0, -1.0])] * 40)[: m + 3]
+    shift = rng.normal(scale=0.05, size=(len(rot), 3))
+    found = _truncated_scores(
+        np.ascontiguousarray(rot.reshape(-1, 9).T),
+        np.ascontiguousarray(shift.T),
+        source,
+        target,
+        0.3**2,
+    )
+    r2 = (((source @ rot.transpose(0, 2, 1)) + shift[:, None] - target) ** 2).sum(axis=2)
+    np.testing.assert_allclose(found, np.clip(1 - r2 / 0.3**2, 0, None).sum(axis=1), rtol=1e-12)

@@ -22,16 +22,10 @@ def test_global_points_are_what_register_describes():
     assert cKDTree(big).query(down)[0].max() < 0.1
 
 
-class _Described:
-    """A descriptor whose descriptors were computed beforehand: describing again fails."""
-
-    def transform(self, X):
-        raise AssertionError("described again")
-
-
-def test_prepared_global_clouds_and_features_register_like_computed_ones(pretrained32):
+def test_prepared_clouds_and_features_register_like_computed_ones(pretrained32):
     from o3d_rpointhop import PointToPlaneICP, RANSACGlobal, RegistrationPipeline
     from o3d_rpointhop.registration import RegistrationContext
+    from o3d_rpointhop.registration.prepared import PreparedCloud
 
     target = make_object(3000, shape_seed=8, sample_seed=1)
     source = make_object(3000, shape_seed=8, sample_seed=2)[::-1] @ np.diag([1, -1, -1.0]) + 0.2
@@ -41,29 +35,40 @@ def test_prepared_global_clouds_and_features_register_like_computed_ones(pretrai
     plain = pipeline.register(source, target)
     computed = RegistrationContext(source, target, descriptor=pretrained32)
     assert computed.downsampled
-    clouds = [
-        np.asarray(computed.global_cloud(w).points) + computed.origin for w in ("source", "target")
+    prepared = [
+        PreparedCloud(
+            np.asarray(computed.global_cloud(w).points) + computed.origin,
+            computed.features(pretrained32, w),
+        )
+        for w in ("source", "target")
     ]
-    features = [computed.features(pretrained32, w) for w in ("source", "target")]
-    stand_in = _Described()
-    prepared = RegistrationContext(
-        source,
-        target,
-        voxel_size=computed.voxel_size,
-        descriptor=stand_in,
-        global_clouds=clouds,
-        features=features,
+    # No descriptor at all: the prepared descriptors are the context's own, and nothing
+    # is described again (the default model is never loaded).
+    context = RegistrationContext(source, target, voxel_size=computed.voxel_size, prepared=prepared)
+    result = RegistrationPipeline([("global", RANSACGlobal()), ("icp", PointToPlaneICP())]).run(
+        context
     )
-    result = pipeline.run(prepared)
+    assert context.descriptor is None
     np.testing.assert_allclose(result.transformation, plain.transformation, atol=1e-9)
     assert result.voxel_size == plain.voxel_size
-    with pytest.raises(ValueError, match="features need the descriptor"):
-        RegistrationContext(source, target, global_clouds=clouds, features=features)
-    with pytest.raises(ValueError, match="source features have 5 rows"):
-        RegistrationContext(
-            source,
-            target,
-            descriptor=stand_in,
-            global_clouds=clouds,
-            features=(features[0][:5], features[1]),
-        )
+    with pytest.raises(ValueError, match="one row per point"):
+        PreparedCloud(prepared[0].points, prepared[0].features[:5])
+    with pytest.raises(TypeError, match="PreparedCloud"):
+        RegistrationContext(source, target, prepared=(prepared[0].points, prepared[1]))
+
+
+def test_prepared_clouds_without_features_are_described_by_the_context(pretrained32):
+    from o3d_rpointhop.registration import RegistrationContext
+    from o3d_rpointhop.registration.prepared import prepare_cloud
+
+    cloud = make_object(3000, shape_seed=8)
+    prepared = prepare_cloud(cloud, 0.05)
+    assert prepared.features is None and len(prepared.points) < len(cloud)
+    context = RegistrationContext(
+        cloud, cloud, descriptor=pretrained32, prepared=(prepared, prepared)
+    )
+    np.testing.assert_allclose(
+        context.features(None, "source"), pretrained32.transform(prepared.points), atol=1e-6
+    )
+    # "auto": the prepared clouds' own spacing, about the voxel they were prepared at.
+    assert 0.5 * 0.05 < context.voxel_size < 1.5 * 0.05

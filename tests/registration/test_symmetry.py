@@ -16,7 +16,7 @@ from o3d_rpointhop import (
     register,
 )
 from o3d_rpointhop.registration.context import RegistrationContext
-from o3d_rpointhop.registration.quality import twin_transformations
+from o3d_rpointhop.registration.flags import twin_transformations
 from o3d_rpointhop.registration.result import StepResult
 from o3d_rpointhop.registration.steps.symmetry import fits_better, truncated_cost
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg

@@ -32,8 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..._utils.compiled import kernel, prange, threads
+from ..._utils.compiled import kernel, popcount, prange, threads
 from ...transforms import rigid_transform, rigid_transforms
+from ._refit import refit_while_growing
 
 __all__ = ["ConsensusResult", "compatibility", "consensus"]
 
@@ -58,7 +59,7 @@ class ConsensusResult:
     seeds: np.ndarray
 
 
-@kernel()
+@kernel(parallel=True)
 def _compatibility_bits(
     source, target, threshold, second_threshold, min_span, source_index, target_index
 ):  # pragma: no cover - compiled
@@ -67,38 +68,58 @@ def _compatibility_bits(
     ``second_threshold`` (the graph whose common neighbours are counted), unless the
     pair is masked: its lengths sum to less than ``min_span`` (too close on both sides
     to say anything about a rotation) or the two matches share a source or a target
-    point. Returns both graphs ``(m, ceil(m / 64))`` uint64 (the same array when the
-    thresholds are equal) and the first graph's degrees."""
-    m = source.shape[0]
+    point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Returns both
+    graphs ``(m, ceil(m / 64))`` uint64 (the same array when the thresholds are equal)
+    and the first graph's degrees.
+
+    Every row is built on its own, in blocks of 64 rows run in parallel: a row's
+    lengths first (one pass over the matches, in SIMD lanes), then its words. Each pair
+    is measured from both ends, with the same bits either way (the differences only
+    change sign)."""
+    m = source.shape[1]
     words = (m + 63) // 64
-    bits = np.zeros((m, words), dtype=np.uint64)
     same = second_threshold == threshold
+    bits = np.zeros((m, words), dtype=np.uint64)
     second = bits if same else np.zeros((m, words), dtype=np.uint64)
     degree = np.zeros(m, dtype=np.int64)
-    one = np.uint64(1)
-    for i in range(m):
-        for j in range(i + 1, m):
-            if source_index[i] == source_index[j] or target_index[i] == target_index[j]:
-                continue
-            dx = source[i, 0] - source[j, 0]
-            dy = source[i, 1] - source[j, 1]
-            dz = source[i, 2] - source[j, 2]
-            ds = np.sqrt(dx * dx + dy * dy + dz * dz)
-            dx = target[i, 0] - target[j, 0]
-            dy = target[i, 1] - target[j, 1]
-            dz = target[i, 2] - target[j, 2]
-            dt = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if ds + dt < min_span:
-                continue
-            gap = abs(ds - dt)
-            if gap < threshold:
-                bits[i, j >> 6] |= one << np.uint64(j & 63)
-                bits[j, i >> 6] |= one << np.uint64(i & 63)
-                degree[i] += 1
-                degree[j] += 1
-            if not same and gap < second_threshold:
-                second[i, j >> 6] |= one << np.uint64(j & 63)
-                second[j, i >> 6] |= one << np.uint64(i & 63)
+    sx, sy, sz = source[0], source[1], source[2]
+    tx, ty, tz = target[0], target[1], target[2]
+    for block in prange(words):
+        ds = np.empty(m)
+        dt = np.empty(m)
+        for i in range(block * 64, min(m, block * 64 + 64)):
+            xi, yi, zi = sx[i], sy[i], sz[i]
+            ui, vi, wi = tx[i], ty[i], tz[i]
+            for j in range(m):
+                dx = xi - sx[j]
+                dy = yi - sy[j]
+                dz = zi - sz[j]
+                ds[j] = np.sqrt(dx * dx + dy * dy + dz * dz)
+                dx = ui - tx[j]
+                dy = vi - ty[j]
+                dz = wi - tz[j]
+                dt[j] = np.sqrt(dx * dx + dy * dy + dz * dz)
+            own_source, own_target = source_index[i], target_index[i]
+            count = 0
+            for w in range(words):
+                word = np.uint64(0)
+                word2 = np.uint64(0)
+                for b in range(min(64, m - w * 64)):
+                    j = w * 64 + b
+                    a, c = ds[j], dt[j]
+                    keep = (
+                        (a + c >= min_span)
+                        & (source_index[j] != own_source)
+                        & (target_index[j] != own_target)
+                    )
+                    gap = abs(a - c)
+                    word |= np.uint64(keep & (gap < threshold)) << np.uint64(b)
+                    word2 |= np.uint64(keep & (gap < second_threshold)) << np.uint64(b)
+                bits[i, w] = word
+                count += popcount(word)
+                if not same:
+                    second[i, w] = word2
+            degree[i] = count
     return bits, second, degree
 
 
@@ -107,71 +128,83 @@ def _consensus_sets(bits, second, seeds, set_size):  # pragma: no cover - compil
     """For every seed, its ``set_size`` partners (compatible with it in ``bits``) with
     the highest second-order compatibility, the number of matches compatible with both
     in ``second`` (ties: the lower index), and those scores; a seed with fewer
-    compatible matches is padded with itself at score 0."""
+    compatible matches is padded with itself at score 0.
+
+    Seeds go in blocks of 64, run in parallel: a block walks the matches once, in
+    index order, and compares each row of ``second`` with the rows of the block's
+    seeds it is compatible with (every row read once per block, not once per seed).
+    Each seed keeps its best partners so far in order, a newcomer going after the
+    partners it does not beat, which is the order of a stable sort."""
     m, words = bits.shape
     n = seeds.shape[0]
     members = np.empty((n, set_size), dtype=np.int64)
     scores = np.zeros((n, set_size), dtype=np.float64)
     one = np.uint64(1)
-    # Population count of a word (the SWAR sum of its bits).
-    m1, m2 = np.uint64(0x5555555555555555), np.uint64(0x3333333333333333)
-    m4, h01 = np.uint64(0x0F0F0F0F0F0F0F0F), np.uint64(0x0101010101010101)
-    for s in prange(n):
-        i = seeds[s]
-        count = 0
-        for w in range(words):
-            x = bits[i, w]
-            x = x - ((x >> one) & m1)
-            x = (x & m2) + ((x >> np.uint64(2)) & m2)
-            count += ((x + (x >> np.uint64(4))) & m4) * h01 >> np.uint64(56)
-        partners = np.empty(count, dtype=np.int64)
-        values = np.empty(count, dtype=np.int64)
-        c = 0
+    for block in prange((n + 63) // 64):
+        first = block * 64
+        size = min(n, first + 64) - first
+        own = seeds[first : first + size]
+        best = np.empty((size, set_size), dtype=np.int64)
+        value = np.empty((size, set_size), dtype=np.int64)
+        kept = np.zeros(size, dtype=np.int64)
         for j in range(m):
-            if (bits[i, j >> 6] >> np.uint64(j & 63)) & one:
+            word, bit = j >> 6, np.uint64(j & 63)
+            for s in range(size):
+                i = own[s]
+                if not (bits[i, word] >> bit) & one:
+                    continue
                 shared = 0
-                for w in range(words):
-                    x = second[i, w] & second[j, w]
-                    x = x - ((x >> one) & m1)
-                    x = (x & m2) + ((x >> np.uint64(2)) & m2)
-                    shared += ((x + (x >> np.uint64(4))) & m4) * h01 >> np.uint64(56)
-                partners[c] = j
-                values[c] = shared
-                c += 1
-        # Highest first; mergesort is stable, so equal scores keep the lower index first.
-        order = np.argsort(-values, kind="mergesort")
-        k = min(set_size, count)
-        for r in range(set_size):
-            if r < k:
-                members[s, r] = partners[order[r]]
-                scores[s, r] = values[order[r]]
-            else:
-                members[s, r] = i
+                for v in range(words):
+                    shared += popcount(second[i, v] & second[j, v])
+                k = kept[s]
+                if k == set_size and shared <= value[s, k - 1]:
+                    continue
+                # Insert after every kept partner with at least this score.
+                r = k if k < set_size else set_size - 1
+                while r > 0 and value[s, r - 1] < shared:
+                    best[s, r] = best[s, r - 1]
+                    value[s, r] = value[s, r - 1]
+                    r -= 1
+                best[s, r] = j
+                value[s, r] = shared
+                if k < set_size:
+                    kept[s] = k + 1
+        for s in range(size):
+            for r in range(set_size):
+                if r < kept[s]:
+                    members[first + s, r] = best[s, r]
+                    scores[first + s, r] = value[s, r]
+                else:
+                    members[first + s, r] = own[s]
     return members, scores
 
 
 @kernel(parallel=True)
 def _truncated_scores(rot, shift, source, target, sq_threshold):  # pragma: no cover
-    """Every hypothesis's ``sum(max(0, 1 - r^2 / tau^2))`` over all matches."""
-    n = rot.shape[0]
+    """Every hypothesis's ``sum(max(0, 1 - r^2 / tau^2))`` over all matches.
+
+    ``rot`` comes as ``(9, n)`` (row-major entries of each rotation), ``shift`` as
+    ``(3, n)``. Hypotheses go in blocks of 64, run in parallel; within a block the
+    matches are the outer loop and the hypotheses the inner one, so SIMD lanes hold
+    different hypotheses and each hypothesis is still summed match by match, in
+    order."""
+    n = rot.shape[1]
     m = source.shape[0]
     out = np.zeros(n)
-    for h in prange(n):
-        total = 0.0
+    for block in prange((n + 63) // 64):
+        first = block * 64
+        last = min(n, first + 64)
+        total = np.zeros(last - first)
         for i in range(m):
-            r2 = 0.0
-            for a in range(3):
-                x = (
-                    rot[h, a, 0] * source[i, 0]
-                    + rot[h, a, 1] * source[i, 1]
-                    + rot[h, a, 2] * source[i, 2]
-                    + shift[h, a]
-                    - target[i, a]
-                )
-                r2 += x * x
-            if r2 < sq_threshold:
-                total += 1.0 - r2 / sq_threshold
-        out[h] = total
+            x0, x1, x2 = source[i, 0], source[i, 1], source[i, 2]
+            y0, y1, y2 = target[i, 0], target[i, 1], target[i, 2]
+            for h in range(first, last):
+                a = rot[0, h] * x0 + rot[1, h] * x1 + rot[2, h] * x2 + shift[0, h] - y0
+                b = rot[3, h] * x0 + rot[4, h] * x1 + rot[5, h] * x2 + shift[1, h] - y1
+                c = rot[6, h] * x0 + rot[7, h] * x1 + rot[8, h] * x2 + shift[2, h] - y2
+                r2 = a * a + b * b + c * c
+                total[h - first] += (1.0 - r2 / sq_threshold) if r2 < sq_threshold else 0.0
+        out[first:last] = total
     return out
 
 
@@ -186,8 +219,8 @@ def _bits(source, target, threshold, second_threshold, min_span, endpoints):
         source_index, target_index = (np.asarray(e, dtype=np.int64) for e in endpoints)
     second = threshold if second_threshold is None else second_threshold
     return _compatibility_bits(
-        np.ascontiguousarray(source, dtype=np.float64),
-        np.ascontiguousarray(target, dtype=np.float64),
+        np.ascontiguousarray(np.asarray(source, dtype=np.float64).T),
+        np.ascontiguousarray(np.asarray(target, dtype=np.float64).T),
         float(threshold),
         float(second),
         float(min_span),
@@ -239,26 +272,16 @@ def _weighted_fit(source, target, transformation, sq_threshold) -> np.ndarray:
 def _refit(transformation, source, target, sq_threshold, rounds: int = 20, weighted=False):
     """Refit on the inlier matches while that gathers more of them (each weighted by
     its truncated quadratic score with ``weighted``); returns the fit and its inliers."""
-    best = transformation
-    inside = _within(best, source, target, sq_threshold)
-    for _ in range(rounds):
-        if inside.sum() < 3:
-            break
-        try:
-            if weighted:
-                refit = _weighted_fit(source, target, best, sq_threshold)
-            else:
-                refit = rigid_transform(source[inside], target[inside])
-        except ValueError:  # collinear inliers: keep what there is
-            break
-        more = _within(refit, source, target, sq_threshold)
-        if more.sum() < inside.sum():
-            break
-        grew = more.sum() > inside.sum()
-        best, inside = refit, more
-        if not grew:
-            break
-    return best, inside
+
+    def within(t):
+        return _within(t, source, target, sq_threshold)
+
+    def fit(t, inliers):
+        if weighted:
+            return _weighted_fit(source, target, t, sq_threshold)
+        return rigid_transform(source[inliers], target[inliers])
+
+    return refit_while_growing(transformation, within, fit, rounds)
 
 
 def _seeds(source, degree, n_seeds: int, seed_radius: float | None) -> np.ndarray:
@@ -352,9 +375,10 @@ def consensus(
     centre = target.mean(axis=0)
     source = np.ascontiguousarray(source - centre)
     target = np.ascontiguousarray(target - centre)
-    bits, second, degree = _bits(
-        source, target, compatibility_threshold, second_order_threshold, min_span, endpoints
-    )
+    with threads(n_threads):
+        bits, second, degree = _bits(
+            source, target, compatibility_threshold, second_order_threshold, min_span, endpoints
+        )
     seeds = _seeds(source, degree, n_seeds, seed_radius)
     transformation = np.eye(4)
     sq_inlier = inlier_threshold**2
@@ -365,9 +389,14 @@ def consensus(
             members = np.concatenate([seeds[:, None], partners], axis=1)
             weights = np.concatenate([weights.max(axis=1, keepdims=True), weights], axis=1)
             rot, shift = rigid_transforms(source[members], target[members], weights)
-            rot, shift = np.ascontiguousarray(rot), np.ascontiguousarray(shift)
             sq_score = float(score_threshold) ** 2
-            score = _truncated_scores(rot, shift, source, target, sq_score)
+            score = _truncated_scores(
+                np.ascontiguousarray(rot.reshape(-1, 9).T),
+                np.ascontiguousarray(shift.T),
+                source,
+                target,
+                sq_score,
+            )
         allowed = np.ones(len(score), dtype=bool) if upright is None else upright(rot)
         best = int(np.argmax(np.where(allowed, score, -1.0)))  # the first of equal scores
     if len(seeds) and allowed[best]:

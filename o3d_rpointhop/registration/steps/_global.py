@@ -10,7 +10,6 @@ import numpy as np
 from ..._utils.params import HasMethods, Interval
 from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
-from ..defaults import default_descriptor
 from ..result import StepResult
 from ._base import RegistrationStep
 
@@ -34,10 +33,11 @@ class GlobalStep(RegistrationStep):
     kind = "global"
 
     def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
-        descriptor = self.descriptor if self.descriptor is not None else context.descriptor
-        if descriptor is None:
-            descriptor = context.descriptor = default_descriptor()
-        return context.features(descriptor, "source"), context.features(descriptor, "target")
+        # None: the context's descriptors (prepared, or its descriptor's).
+        return (
+            context.features(self.descriptor, "source"),
+            context.features(self.descriptor, "target"),
+        )
 
     def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
         src, tgt = self._describe(context)

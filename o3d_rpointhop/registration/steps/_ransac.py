@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from ..._utils.compiled import kernel
 from ...transforms import rigid_transform, rigid_transforms
+from ._refit import refit_while_growing
 
 __all__ = ["RansacResult", "ransac"]
 
@@ -177,22 +178,14 @@ def _refit_on_clouds(transformation, clouds, threshold: float, tree: cKDTree, ro
 
 def _refit_on_matches(transformation, planes, sq_threshold, source, target, rounds: int = 5):
     """Refit on the inlier matches while that gathers more of them."""
-    inliers = _residuals(transformation[None, :3, :3], transformation[None, :3, 3], *planes)[0]
-    inliers = inliers < sq_threshold
-    for _ in range(rounds):
-        if inliers.sum() < 3:
-            break
-        try:
-            refit = rigid_transform(source[inliers], target[inliers])
-        except ValueError:  # collinear inliers: keep the sample's fit
-            break
-        more = _residuals(refit[None, :3, :3], refit[None, :3, 3], *planes)[0] < sq_threshold
-        if more.sum() < inliers.sum():
-            break
-        transformation, grew, inliers = refit, more.sum() > inliers.sum(), more
-        if not grew:
-            break
-    return transformation
+
+    def within(t):
+        return _residuals(t[None, :3, :3], t[None, :3, 3], *planes)[0] < sq_threshold
+
+    def fit(t, inliers):
+        return rigid_transform(source[inliers], target[inliers])
+
+    return refit_while_growing(transformation, within, fit, rounds)[0]
 
 
 def ransac(

@@ -17,7 +17,7 @@ from sklearn.base import clone
 
 from ..._utils.params import HasMethods, Interval
 from ..context import RegistrationContext
-from ..quality import twin_transformations
+from ..flags import twin_transformations
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE, RegistrationStep
 from .icp import PointToPlaneICP

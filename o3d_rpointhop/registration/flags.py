@@ -1,5 +1,5 @@
-"""How far a registration can be trusted: refused and risky input geometry, and the
-``converged`` / ``ambiguous`` flags of a result, with their thresholds.
+"""How far a registration result can be trusted: the ``converged`` / ``ambiguous`` flags
+and their thresholds.
 
 Measured on training data (docs/registration.md, "Flags"): unrelated objects registered
 to each other leave their inliers spread over the threshold (0.53-0.58 of it, RMS), true
@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .checks import RegistrationWarning
+
 if TYPE_CHECKING:
     from .context import RegistrationContext
 
@@ -23,81 +25,10 @@ __all__ = [
     "MAX_SPREAD",
     "MIN_FITNESS",
     "Quality",
-    "RegistrationWarning",
     "assess",
-    "check_geometry",
     "twin_transformations",
+    "warn_flags",
 ]
-
-
-class RegistrationWarning(UserWarning):
-    """A registration result to treat with care: degenerate input, or a flagged result."""
-
-
-# A cloud whose second principal extent is below this share of its first is a line, and
-# whose third is below it, a plane (relative standard deviations).
-_COLLINEAR = 1e-6
-_PLANAR = 1e-4
-# float32 coordinates whose rounding step exceeds this share of the cloud's extent.
-_FLOAT32_RESOLUTION = 1e-5
-
-
-def _raw_float32(cloud: Any) -> np.ndarray | None:
-    """The caller's coordinates when they are float32 (numpy or tensor Open3D)."""
-    if isinstance(cloud, np.ndarray) and cloud.dtype == np.float32:
-        return cloud
-    point = getattr(cloud, "point", None)
-    if point is not None and "positions" in point:
-        positions = point.positions
-        if "Float32" in str(positions.dtype):
-            return positions.cpu().numpy()
-    return None
-
-
-def check_geometry(points: np.ndarray, name: str, raw: Any = None) -> None:
-    """Refuse clouds a rigid registration cannot be defined on, warn about risky ones.
-
-    Raises
-    ------
-    ValueError
-        If every point coincides, or the points lie on one line (a rotation about it
-        cannot be recovered).
-
-    Warns
-    -----
-    RegistrationWarning
-        For a planar cloud (in-plane turns and flips may be undetermined; see
-        ``RegistrationResult.ambiguous``), and for float32 coordinates whose rounding
-        step is coarse for the cloud's size (survey coordinates: pass float64).
-    """
-    if not np.any(points != points[0]):
-        raise ValueError(f"{name} has no spatial extent: all its points coincide")
-    spread = np.sqrt(np.clip(np.linalg.eigvalsh(np.cov(points.T)), 0.0, None))[::-1]
-    if spread[1] <= _COLLINEAR * spread[0]:
-        raise ValueError(
-            f"{name} is collinear (its points lie on one line): a rotation about that line "
-            "cannot be recovered, so there is no rigid registration to find"
-        )
-    if spread[2] <= _PLANAR * spread[0]:
-        warnings.warn(
-            f"{name} is planar (flat to {spread[2] / spread[0]:.1e} of its size): turns "
-            "within the plane and flips may be undetermined; check result.ambiguous",
-            RegistrationWarning,
-            stacklevel=4,
-        )
-    raw32 = _raw_float32(raw)
-    if raw32 is not None:
-        step = float(np.spacing(np.float32(np.abs(raw32).max())))
-        extent = float(points.max(axis=0).max() - points.min(axis=0).min())
-        if step > _FLOAT32_RESOLUTION * extent:
-            warnings.warn(
-                f"{name} holds float32 coordinates up to {np.abs(raw32).max():.6g}, where "
-                f"float32 resolves only {step:.3g}, coarse for a cloud {extent:.3g} across: "
-                "its points were already rounded before registration; pass float64 "
-                "(or coordinates relative to a local origin) for full precision",
-                RegistrationWarning,
-                stacklevel=4,
-            )
 
 
 #: Fitness below which a result is flagged as not converged.

@@ -1,0 +1,105 @@
+"""The pose graph of a scan set: starting poses along a maximum spanning tree of the
+registered pairs, and Open3D's global optimisation over every edge (the tree's edges
+certain, the others loop closures its line process may prune)."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+
+from .settings import RegistrationSettings
+
+__all__ = ["optimise", "optimise_pose_graph", "poses_from_tree", "spanning_tree"]
+
+reg = o3d.pipelines.registration
+
+
+def spanning_tree(edges: dict, n: int) -> list[tuple[int, int]]:
+    """Maximum spanning forest by fitness (Kruskal)."""
+    parent = list(range(n))
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    tree = []
+    for (i, j), _edge in sorted(edges.items(), key=lambda e: -e[1][1]):
+        ri, rj = root(i), root(j)
+        if ri != rj:
+            parent[ri] = rj
+            tree.append((i, j))
+    return tree
+
+
+def poses_from_tree(tree, edges, n: int) -> list:
+    """Poses (scan -> scan 0) along the tree; None where scan 0 cannot be reached."""
+    poses: list = [None] * n
+    poses[0] = np.eye(4)
+    changed = True
+    while changed:
+        changed = False
+        for i, j in tree:
+            t_ij = edges[(i, j)][0]  # maps j into i
+            if poses[i] is not None and poses[j] is None:
+                poses[j] = poses[i] @ t_ij
+                changed = True
+            elif poses[j] is not None and poses[i] is None:
+                poses[i] = poses[j] @ np.linalg.inv(t_ij)
+                changed = True
+    return poses
+
+
+def optimise_pose_graph(graph, option) -> None:
+    """Open3D's Levenberg-Marquardt global optimisation of ``graph`` in place, with
+    ``option`` (a ``GlobalOptimizationOption``) and Open3D's default convergence
+    criteria, its progress messages silenced."""
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        reg.global_optimization(
+            graph,
+            reg.GlobalOptimizationLevenbergMarquardt(),
+            reg.GlobalOptimizationConvergenceCriteria(),
+            option,
+        )
+
+
+def optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettings):
+    """Open3D's global optimisation over the connected scans; returns the graph, the
+    optimised poses (None for unconnected scans) and the edges it kept."""
+    nodes = [k for k, p in enumerate(poses) if p is not None]
+    index = {k: m for m, k in enumerate(nodes)}
+    graph = reg.PoseGraph()
+    for k in nodes:
+        graph.nodes.append(reg.PoseGraphNode(poses[k]))
+    tree_set = set(tree)
+    listed = []
+    for (i, j), (t_ij, _, information) in edges.items():
+        if i not in index or j not in index:
+            continue
+        # Open3D's edge maps its source node into its target node: j into i.
+        graph.edges.append(
+            reg.PoseGraphEdge(
+                index[j], index[i], t_ij, information, uncertain=(i, j) not in tree_set
+            )
+        )
+        listed.append((i, j))
+    optimise_pose_graph(
+        graph,
+        reg.GlobalOptimizationOption(
+            max_correspondence_distance=settings.edge_distance,
+            edge_prune_threshold=0.25,
+            preference_loop_closure=1.0,
+            reference_node=0,
+        ),
+    )
+    optimised: list = [None] * len(poses)
+    # Relative to scan 0's optimised pose, so that scan 0 is exactly the identity.
+    reference = np.linalg.inv(np.array(graph.nodes[index[0]].pose))
+    for k in nodes:
+        optimised[k] = reference @ np.array(graph.nodes[index[k]].pose)
+    optimised[0] = np.eye(4)
+    # Open3D removes the edges its line process pruned; what remains was kept.
+    remaining = {(nodes[e.target_node_id], nodes[e.source_node_id]) for e in graph.edges}
+    kept = [e for e in listed if e in remaining]
+    return graph, optimised, kept

@@ -1,0 +1,103 @@
+"""Clouds prepared once for many registrations: the global step's cloud of a scan at a
+given resolution, and its descriptors.
+
+A single registration prepares its two clouds itself (:class:`RegistrationContext`
+downsamples and describes them). A caller that registers one scan to many (scan sets:
+:func:`~o3d_rpointhop.register_multiway`) prepares every scan once with
+:func:`prepare_cloud`, at one resolution for all of them (:func:`common_voxel`), and
+gives the context the prepared scans.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import open3d as o3d
+
+from .._utils.geometry import point_spacing
+
+__all__ = ["PreparedCloud", "common_voxel", "prepare_cloud"]
+
+
+@dataclass
+class PreparedCloud:
+    """A scan as the global step sees it.
+
+    Attributes
+    ----------
+    points : ndarray of shape (n, 3)
+        The global cloud, in the scan's own coordinates.
+    features : ndarray of shape (n, d) or None
+        The descriptors of ``points``, one row per point (``None``: not described; a
+        global step then describes ``points`` itself).
+    normals : ndarray of shape (n, 3) or None
+        Normals of ``points`` for point-to-plane ICP on the global cloud (``None``: the
+        context estimates them when a step needs them).
+    """
+
+    points: np.ndarray
+    features: np.ndarray | None = None
+    normals: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.points = np.asarray(self.points, dtype=np.float64)
+        if self.points.ndim != 2 or self.points.shape[1] != 3:
+            raise ValueError(f"prepared points must be (n, 3), got {self.points.shape}")
+        if self.features is not None:
+            self.features = np.asarray(self.features)
+            if self.features.ndim != 2 or len(self.features) != len(self.points):
+                raise ValueError(
+                    f"prepared features must be one row per point: {self.features.shape} "
+                    f"for {len(self.points)} points"
+                )
+        if self.normals is not None:
+            self.normals = np.asarray(self.normals, dtype=np.float64)
+            if self.normals.shape != self.points.shape:
+                raise ValueError(
+                    f"prepared normals must be one per point: {self.normals.shape} for "
+                    f"{len(self.points)} points"
+                )
+
+
+def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
+    """One resolution for every scan: the largest that any scan needs, its own spacing
+    widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
+    voxel^2), so that no scan is finer than it can be described."""
+    return float(
+        max(point_spacing(c) * max(1.0, np.sqrt(len(c) / n_global_points)) for c in clouds)
+    )
+
+
+def prepare_cloud(
+    points: np.ndarray,
+    voxel: float,
+    descriptor: Any = None,
+    viewpoint: Any = None,
+    normal_radius: float | None = None,
+) -> PreparedCloud:
+    """A scan voxel-downsampled at ``voxel``; with ``descriptor``, described (seen from
+    ``viewpoint``, the scan's sensor position in its own coordinates, when given); with
+    ``normal_radius``, with normals estimated as the registration context estimates them
+    (within that radius, at most 30 neighbours).
+
+    The grid is laid about the scan's own centroid, so that nothing is lost far from
+    the origin; the points come back in the scan's coordinates.
+    """
+    origin = points.mean(axis=0)
+    down = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points - origin))
+    down = down.voxel_down_sample(voxel)
+    normals = None
+    if normal_radius is not None:
+        search = o3d.geometry.KDTreeSearchParamHybrid(radius=float(normal_radius), max_nn=30)
+        down.estimate_normals(search)  # each point's own: the same on any thread count
+        normals = np.asarray(down.normals).copy()
+    kept = np.asarray(down.points) + origin
+    features = None
+    if descriptor is not None:
+        if viewpoint is None:
+            features = np.asarray(descriptor.transform(kept))
+        else:
+            features = np.asarray(descriptor.transform(kept, viewpoints=viewpoint))
+    return PreparedCloud(kept, features, normals)
