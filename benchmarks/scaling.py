@@ -23,13 +23,10 @@ import sys
 import time
 from pathlib import Path
 
+from o3d_rpointhop.evaluation.registry import entries
+
 RESULTS = Path(__file__).resolve().parent / "results"
-METHODS = {
-    "rpointhop-128": "R-PointHop, pretrained, 128 principal axes, n_jobs=-1",
-    "rpointhop-32": "R-PointHop, pretrained, 32 principal axes, n_jobs=-1",
-    "rpointhop-full": "R-PointHop, pretrained, 1624-D, n_jobs=-1",
-    "fpfh": "Open3D FPFH, normals 6x / histograms 15x the spacing, 30 / 100 neighbours",
-}
+METHODS = {name: e.description for name, e in entries("scaling").items()}
 FULL_MAX_POINTS = 200_000
 
 

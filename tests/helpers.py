@@ -20,6 +20,12 @@ def random_motion(seed: int, translation_scale: float = 1.0) -> tuple[np.ndarray
     return rotation, rng.uniform(-1.0, 1.0, 3) * translation_scale
 
 
+#: The README's contract: descriptors are invariant to rigid motions and equivariant to
+#: permutations of the points within this relative difference (float rounding, not
+#: the last bit); the same input gives the same bytes on any thread count.
+CONTRACT = 1e-5
+
+
 def relative_difference(a: np.ndarray, b: np.ndarray) -> float:
     """Largest deviation between descriptor arrays, relative to their spread.
 

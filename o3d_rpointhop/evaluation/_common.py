@@ -15,6 +15,7 @@ from ..registration.defaults import DEFAULT_GLOBAL_POINTS
 from ..registration.settings import resolve_voxel_size
 from .methods import run_method
 from .metrics import is_symmetry, pair_errors, summarize
+from .records import PairRecord
 
 __all__ = ["Progress", "evaluate_methods", "fixed_resolution", "register_resolution"]
 
@@ -83,7 +84,8 @@ def model_facts(model: RPointHopTransformer) -> dict:
 
 
 def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=None, tol=(5.0, 0.05)):
-    """Run every method on every pair; return {method: summary} and per-pair records.
+    """Run every method on every pair; return ``{method: summary}`` and
+    ``{method: [PairRecord, ...]}``.
 
     ``shapes`` (the whole shape of each pair) enables the symmetry check; ``tol`` is the
     success threshold (rotation in degrees, translation in the data's unit).
@@ -96,11 +98,13 @@ def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=Non
             run = run_method(
                 method, pair.source, pair.target, descriptor=model, voxel=voxels[k], seed=seed
             )
-            rec = {**pair_errors(run.transformation, pair.truth), "seconds": run.seconds}
-            rec["pair"] = pair.name
+            symmetric = None
             if shapes is not None:
-                rec["symmetric"] = is_symmetry(run.transformation, pair.truth, shapes[k])
-            recs.append(rec)
+                symmetric = is_symmetry(run.transformation, pair.truth, shapes[k])
+            errors = pair_errors(run.transformation, pair.truth)
+            recs.append(
+                PairRecord(**errors, seconds=run.seconds, pair=pair.name, symmetric=symmetric)
+            )
             progress.step(method)
         summaries[method] = summarize(recs, *tol)
         records[method] = recs

@@ -17,6 +17,7 @@ from ._common import (
     register_resolution,
 )
 from .methods import check_methods
+from .records import as_rows
 
 __all__ = ["BUNNY_PROTOCOLS", "run_bunny"]
 
@@ -89,6 +90,6 @@ def run_bunny(
             "description": BUNNY_PROTOCOLS[protocol],
             "success": f"rotation error < {tol[0]} deg and translation error < {tol[1] * 1000} mm",
             "summary": summaries,
-            "records": records,
+            "records": as_rows(records),
         }
     return out

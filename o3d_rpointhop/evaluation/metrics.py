@@ -7,6 +7,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..transforms import apply_transform, euler_angles_deg, rotation_error_deg, translation_error
+from .records import PairRecord
 
 __all__ = [
     "is_symmetry",
@@ -50,17 +51,18 @@ def pair_errors(estimate: np.ndarray, truth: np.ndarray) -> dict:
 
 
 def summarize(
-    records: list[dict], rotation_tol: float = 5.0, translation_tol: float = 0.05
+    records: list[PairRecord], rotation_tol: float = 5.0, translation_tol: float = 0.05
 ) -> dict:
     """Aggregate per-pair records into the paper's and the isotropic measures.
 
     The paper's MSE, RMSE and MAE are over the three Euler angles (degrees) and the three
-    translation components, as in DCP and R-PointHop.
+    translation components, as in DCP and R-PointHop. The measures up to symmetry are
+    given when every record says whether its estimate is a symmetry of the shape.
     """
-    euler = np.array([r["euler_error_deg"] for r in records])
-    trans = np.array([r["translation_error_xyz"] for r in records])
-    rot_iso = np.array([r["rotation_error_deg"] for r in records])
-    trans_iso = np.array([r["translation_error"] for r in records])
+    euler = np.array([r.euler_error_deg for r in records])
+    trans = np.array([r.translation_error_xyz for r in records])
+    rot_iso = np.array([r.rotation_error_deg for r in records])
+    trans_iso = np.array([r.translation_error for r in records])
     success = (rot_iso < rotation_tol) & (trans_iso < translation_tol)
     out = {
         "pairs": len(records),
@@ -73,10 +75,10 @@ def summarize(
         "median_rotation_error_deg": float(np.median(rot_iso)),
         "median_translation_error": float(np.median(trans_iso)),
         "success_rate": float(success.mean()),
-        "seconds_per_pair": float(np.mean([r["seconds"] for r in records])),
+        "seconds_per_pair": float(np.mean([r.seconds for r in records])),
     }
-    if all("symmetric" in r for r in records):
-        sym = np.array([r["symmetric"] for r in records])
+    if all(r.symmetric is not None for r in records):
+        sym = np.array([r.symmetric for r in records])
         out["success_rate_up_to_symmetry"] = float((success | sym).mean())
         # A failure that is a symmetry of the shape (a box turned by 180 deg) is an
         # ambiguity of the data, not an error of the method: the paper's MAE over the rest.

@@ -17,6 +17,7 @@ from ._common import (
 )
 from .methods import check_methods
 from .protocols import PROTOCOLS, make_pairs
+from .records import as_rows
 
 __all__ = ["MODELNET40_PROTOCOLS", "ANGLE_SWEEP", "run_modelnet40"]
 
@@ -120,7 +121,7 @@ def run_modelnet40(
         out["protocols"][protocol] = {
             "description": MODELNET40_PROTOCOLS[protocol],
             "summary": summary,
-            "records": records,
+            "records": as_rows(records),
         }
         if fit_seconds is not None:
             out["protocols"][protocol]["fit_seconds"] = fit_seconds

@@ -27,6 +27,8 @@ from ..registration.prepared import common_voxel
 from ..registration.result import MultiwayResult
 from ..transforms import apply_transform, rotation_error_deg
 from .methods import feature_ransac, fpfh_recipe_cloud
+from .records import ScanRecord
+from .registry import entries
 
 __all__ = [
     "OBJECTS",
@@ -37,11 +39,8 @@ __all__ = [
 ]
 
 OBJECTS = ("bunny", "dragon")
-DESCRIPTORS = {
-    "rpointhop": "R-PointHop (pretrained, default axes) through register_multiway",
-    "fpfh": "FPFH (radii from the spacing) through the same pipeline",
-    "open3d-recipe": "Open3D's multiway tutorial: FPFH + RANSAC + ICP per pair, its pose graph",
-}
+#: The methods of the benchmark, by name (their entries: :mod:`.registry`).
+DESCRIPTORS = {name: e.description for name, e in entries("multiway").items()}
 TOLERANCE = (2.0, 0.002)  # degrees, metres
 
 
@@ -163,26 +162,21 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
             for k, n in enumerate(names):
                 pose = result.poses[k]
                 if pose is None:
-                    rows.append({"scan": n, "placed": False})
+                    rows.append(ScanRecord(n, placed=False))
                     continue
                 gap = apply_transform(moved[k], pose) - apply_transform(moved[k], truth[k])
                 rows.append(
-                    {
-                        "scan": n,
-                        "placed": True,
-                        "rotation_error_deg": rotation_error_deg(pose, truth[k]),
-                        "mean_point_error": float(np.linalg.norm(gap, axis=1).mean()),
-                    }
+                    ScanRecord(
+                        n,
+                        placed=True,
+                        rotation_error_deg=rotation_error_deg(pose, truth[k]),
+                        mean_point_error=float(np.linalg.norm(gap, axis=1).mean()),
+                    )
                 )
-            ok = [
-                r["placed"]
-                and r["rotation_error_deg"] < TOLERANCE[0]
-                and r["mean_point_error"] < TOLERANCE[1]
-                for r in rows
-            ]
+            ok = [r.within(TOLERANCE) for r in rows]
             entry["methods"][method] = {
                 "description": DESCRIPTORS[method],
-                "scans": rows,
+                "scans": [r.as_dict() for r in rows],
                 "all_within_tolerance": bool(all(ok)),
                 "within_tolerance": int(sum(ok)),
                 "edges_kept": len(result.edges),

@@ -15,6 +15,7 @@ from ._common import Progress, machine_facts, model_facts
 from .diagnostics import pair_diagnostics
 from .methods import METHODS, check_methods, run_method, shipped_scene_model
 from .metrics import mcnemar, rmse_3dmatch
+from .records import ScenePairRecord, as_rows
 from .scene_models import leave_one_scene_out
 
 __all__ = ["official_pairs", "run_3dmatch", "summarize_3dmatch", "VIEWPOINTS"]
@@ -233,23 +234,23 @@ def _rows(diagnostics: dict, bench: str) -> dict:
     }
 
 
-def _record(pair, estimate, truth, seconds: float, claimed) -> dict:
+def _record(pair, estimate, truth, seconds: float, claimed) -> ScenePairRecord:
     """One method's result on one pair, in the pair's original frames."""
     rmse = rmse_3dmatch(estimate, truth, pair.information)
     rotation, translation = rotation_error_deg(estimate, truth), translation_error(estimate, truth)
-    return {
-        "pair": _name(pair),
-        "scene": pair.scene,
-        "overlap": pair.overlap,
-        "rmse": rmse,
-        "registered": rmse < RMSE_THRESHOLD,
-        "registered_re_te": rotation < RE_TE_THRESHOLDS[0] and translation < RE_TE_THRESHOLDS[1],
-        "claimed": claimed,
-        "seconds": seconds,
-        "rotation_error_deg": rotation,
-        "translation_error": translation,
-        "transformation": np.round(estimate, 12).tolist(),
-    }
+    return ScenePairRecord(
+        pair=_name(pair),
+        scene=pair.scene,
+        overlap=pair.overlap,
+        rmse=rmse,
+        registered=rmse < RMSE_THRESHOLD,
+        registered_re_te=rotation < RE_TE_THRESHOLDS[0] and translation < RE_TE_THRESHOLDS[1],
+        claimed=claimed,
+        seconds=seconds,
+        rotation_error_deg=rotation,
+        translation_error=translation,
+        transformation=np.round(estimate, 12).tolist(),
+    )
 
 
 def summarize_3dmatch(records: dict, diagnostics: dict | None = None) -> dict:
@@ -260,9 +261,8 @@ def summarize_3dmatch(records: dict, diagnostics: dict | None = None) -> dict:
     Parameters
     ----------
     records : dict
-        ``{method: [record, ...]}``, every method on the same pairs in the same order;
-        a record holds at least ``scene``, ``registered``, ``registered_re_te``,
-        ``claimed``, ``seconds``, ``rotation_error_deg`` and ``translation_error``.
+        ``{method: [ScenePairRecord, ...]}``, every method on the same pairs in the
+        same order.
     diagnostics : dict, default=None
         ``{descriptor: [row, ...]}`` of :func:`~.diagnostics.pair_diagnostics` rows.
     """
@@ -272,12 +272,12 @@ def summarize_3dmatch(records: dict, diagnostics: dict | None = None) -> dict:
         "per_scene": _per_scene(records),
         "paired": {
             f"{a} vs {b}": mcnemar(
-                [r["registered"] for r in records[a]], [r["registered"] for r in records[b]]
+                [r.registered for r in records[a]], [r.registered for r in records[b]]
             )
             for k, a in enumerate(methods)
             for b in methods[k + 1 :]
         },
-        "records": records,
+        "records": as_rows(records),
     }
     if diagnostics:
         out["diagnostics"] = {
@@ -309,36 +309,38 @@ def _diagnostic_summary(rows: list[dict]) -> dict:
     }
 
 
-def _scene_mean(recs: list[dict], key: str) -> float:
+def _scene_mean(recs: list[ScenePairRecord], key: str) -> float:
     """The mean over scenes of each scene's share of ``key`` (the official recall)."""
-    scenes = sorted({r["scene"] for r in recs})
-    return float(np.mean([np.mean([r[key] for r in recs if r["scene"] == s]) for s in scenes]))
+    scenes = sorted({r.scene for r in recs})
+    return float(
+        np.mean([np.mean([getattr(r, key) for r in recs if r.scene == s]) for s in scenes])
+    )
 
 
-def _summary(recs: list[dict]) -> dict:
+def _summary(recs: list[ScenePairRecord]) -> dict:
     """One method's summary over a benchmark's pairs (see :func:`run_3dmatch`)."""
-    registered = [r for r in recs if r["registered"]]
-    claims = [r for r in recs if r["claimed"] is not None]
-    claimed = [r for r in claims if r["claimed"]]
+    registered = [r for r in recs if r.registered]
+    claims = [r for r in recs if r.claimed is not None]
+    claimed = [r for r in claims if r.claimed]
     return {
         "pairs": len(recs),
-        "scenes": len({r["scene"] for r in recs}),
+        "scenes": len({r.scene for r in recs}),
         "registration_recall": _scene_mean(recs, "registered"),
-        "registration_recall_pairs": float(np.mean([r["registered"] for r in recs])),
+        "registration_recall_pairs": float(np.mean([r.registered for r in recs])),
         "recall_re_te": _scene_mean(recs, "registered_re_te"),
         # Of the results a method vouches for, the share that is right (None: the
         # method reports no flag; or it vouched for none).
-        "precision": float(np.mean([r["registered"] for r in claimed])) if claimed else None,
+        "precision": float(np.mean([r.registered for r in claimed])) if claimed else None,
         "claimed": len(claimed) if claims else None,
         # Errors of the registered pairs (the official protocol's): a failed pair's
         # error says only that it failed.
-        "median_rotation_error_deg": float(np.median([r["rotation_error_deg"] for r in registered]))
+        "median_rotation_error_deg": float(np.median([r.rotation_error_deg for r in registered]))
         if registered
         else None,
-        "median_translation_error": float(np.median([r["translation_error"] for r in registered]))
+        "median_translation_error": float(np.median([r.translation_error for r in registered]))
         if registered
         else None,
-        "seconds_per_pair": float(np.mean([r["seconds"] for r in recs])),
+        "seconds_per_pair": float(np.mean([r.seconds for r in recs])),
     }
 
 
@@ -347,12 +349,12 @@ def _per_scene(records: dict) -> dict:
     out = {}
     for method, recs in records.items():
         out[method] = {}
-        for scene in sorted({r["scene"] for r in recs}):
-            mine = [r for r in recs if r["scene"] == scene]
+        for scene in sorted({r.scene for r in recs}):
+            mine = [r for r in recs if r.scene == scene]
             out[method][scene] = {
                 "pairs": len(mine),
-                "registration_recall": float(np.mean([r["registered"] for r in mine])),
-                "recall_re_te": float(np.mean([r["registered_re_te"] for r in mine])),
+                "registration_recall": float(np.mean([r.registered for r in mine])),
+                "recall_re_te": float(np.mean([r.registered_re_te for r in mine])),
             }
     return out
 

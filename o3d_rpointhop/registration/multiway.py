@@ -32,13 +32,13 @@ from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints
 from .checks import RegistrationWarning
 from .context import RegistrationContext
-from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor
-from .pipeline import RegistrationPipeline
+from .defaults import default_descriptor, resolve_global_method, resolve_global_points
+from .pipeline import GLOBAL_METHODS, RegistrationPipeline
 from .pose_graph import optimise, poses_from_tree, spanning_tree
 from .prepared import PreparedCloud, common_voxel, prepare_cloud
 from .result import MultiwayResult
 from .settings import RegistrationSettings
-from .steps import PointToPlaneICP, RANSACGlobal
+from .steps import PointToPlaneICP
 
 __all__ = ["register_multiway"]
 
@@ -53,14 +53,15 @@ RETRIEVED_NEIGHBOURS = 6
 ALL_PAIRS_UP_TO = 12
 
 
-def _pair_steps(settings: RegistrationSettings, screen: bool) -> list:
-    """How a pair is registered. Screening a candidate pair: ``register()``'s RANSAC,
+def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: str = "ransac"):
+    """How a pair is registered. Screening a candidate pair: ``register()``'s global step
+    for the descriptor (``global_method``: RANSAC unless the descriptor states another),
     then one point-to-plane ICP pass at the settings' widest ICP distance on the
     global clouds (the common resolution). Refining a kept edge from the optimised
     poses: ``register()``'s point-to-plane ICP, ending on the full scans."""
     if screen:
         coarse = PointToPlaneICP(settings.icp_distances[0], full_resolution=False)
-        return [("global", RANSACGlobal()), ("refine", coarse)]
+        return [("global", GLOBAL_METHODS[global_method]()), ("refine", coarse)]
     return [("refine", PointToPlaneICP())]
 
 
@@ -79,7 +80,15 @@ def _pair_context(source, target, prepared_source, prepared_target, settings, se
 
 
 def _register_pair(
-    source, target, prepared_source, prepared_target, settings, seed, init=None, normals=None
+    source,
+    target,
+    prepared_source,
+    prepared_target,
+    settings,
+    seed,
+    init=None,
+    normals=None,
+    global_method="ransac",
 ):
     """Scan ``source`` onto scan ``target``: screened from scratch (``init=None``) or
     refined from ``init``.
@@ -93,7 +102,8 @@ def _register_pair(
     ``register()``'s point-to-plane ICP from ``init``, ending on the full scans, and
     returns the transformation and the information matrix there (fitness None: a kept
     edge keeps the fitness that made it one, so neither it nor the flags are measured
-    again). ``normals``: the full target scan's normals (:func:`_full_normals`)."""
+    again). ``normals``: the full target scan's normals (:func:`_full_normals`);
+    ``global_method``: the screening's global step (a key of ``GLOBAL_METHODS``)."""
     edge = settings.edge_distance
     if init is None:
         source, target = prepared_source.points, prepared_target.points
@@ -104,7 +114,7 @@ def _register_pair(
     if init is None:
         with warnings.catch_warnings():  # a pair that does not fit is simply no edge
             warnings.simplefilter("ignore", RegistrationWarning)
-            pipeline = RegistrationPipeline(_pair_steps(settings, screen=True))
+            pipeline = RegistrationPipeline(_pair_steps(settings, True, global_method))
             result = pipeline.run(context, None, assess_ambiguity=False)
         transformation = result.transformation
         local = context.to_local(transformation)
@@ -151,7 +161,7 @@ def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
     {
         "clouds": [list, tuple],
         "descriptor": [None, HasMethods(["transform"])],
-        "n_global_points": [Interval(Integral, 3, None, closed="left")],
+        "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
         "min_fitness": [Interval(Real, 0, 1, closed="right")],
         "n_jobs": [None, Integral],
         "progress": [None, "boolean"],
@@ -166,7 +176,7 @@ def register_multiway(
     descriptor: Any = None,
     *,
     viewpoints: Any = None,
-    n_global_points: int = DEFAULT_GLOBAL_POINTS,
+    n_global_points: int | str = "auto",
     min_fitness: float = MIN_EDGE_FITNESS,
     n_jobs: int | None = None,
     progress: bool | None = None,
@@ -182,13 +192,18 @@ def register_multiway(
     descriptor : transformer, default=None
         ``None`` is ``register()``'s default (the pretrained R-PointHop model on 128
         principal axes); an ``FPFHTransformer`` works the same way. Each scan is
-        described once.
+        described once. Pairs are screened with the global step the descriptor states
+        (``registration_global_method_``: the consensus for the shipped scene model,
+        so that ``RPointHopTransformer.pretrained("scene")`` registers scans of rooms
+        as ``register()`` does), else RANSAC.
     viewpoints : None, "origin" or array-like of shape (n_scans, 3), default=None
         Where each scan's sensor stood, in the scan's own coordinates; ``"origin"``:
         every scan is in its sensor's frame. Normals and local frames then face the
         sensor (see :func:`~o3d_rpointhop.register`). ``None``: no sensor is known.
-    n_global_points : int, default=2048
-        The common resolution keeps about this many points of the largest scan.
+    n_global_points : int or "auto", default="auto"
+        The common resolution keeps about this many points of the largest scan;
+        ``"auto"``: the descriptor's ``registration_points_`` (the scene model: 4096),
+        else 2048.
     min_fitness : float, default=0.3
         A pair becomes an edge when its screening leaves at least this share of the
         source scan (at the common resolution) within the settings' ``edge_distance``
@@ -219,7 +234,13 @@ def register_multiway(
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     views = as_viewpoints(viewpoints, len(points))
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
-    voxel = common_voxel(points, n_global_points)
+    global_method = resolve_global_method("auto", worker)
+    if global_method not in GLOBAL_METHODS:
+        raise ValueError(
+            f"the descriptor's registration_global_method_ {global_method!r} is not one of "
+            f"{sorted(GLOBAL_METHODS)}"
+        )
+    voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
     settings = (settings or RegistrationSettings()).at(voxel)
     # Every scan is downsampled, described and given normals once, for all its pairs.
     prepared = parallel_map(
@@ -237,7 +258,10 @@ def register_multiway(
     candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
     results = parallel_map(
         _register_pair,
-        [(None, None, prepared[j], prepared[i], settings, seed) for i, j in candidates],
+        [
+            (None, None, prepared[j], prepared[i], settings, seed, None, None, global_method)
+            for i, j in candidates
+        ],
         n_jobs=n_jobs,
         progress=progress,
         desc="pairs",

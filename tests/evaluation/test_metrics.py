@@ -13,6 +13,11 @@ from o3d_rpointhop.evaluation.metrics import (
     rmse_3dmatch,
     summarize,
 )
+from o3d_rpointhop.evaluation.records import PairRecord
+
+
+def _records(*rows):
+    return [PairRecord(**row) for row in rows]
 
 
 def test_errors_and_summary():
@@ -25,7 +30,7 @@ def test_errors_and_summary():
     assert e["translation_error"] == pytest.approx(0.1)
     assert sorted(np.abs(e["euler_error_deg"])) == pytest.approx([0, 0, 90])
     good = {**pair_errors(np.eye(4), truth), "seconds": 1.0, "symmetric": False}
-    s = summarize([good, {**e, "seconds": 3.0, "symmetric": True}])
+    s = summarize(_records(good, {**e, "seconds": 3.0, "symmetric": True}))
     assert s["success_rate"] == 0.5 and s["success_rate_up_to_symmetry"] == 1.0
     assert s["mae_r"] == pytest.approx(15.0) and s["seconds_per_pair"] == 2.0
     assert s["mae_r_not_symmetric"] == pytest.approx(0.0)  # the flip is left out
@@ -171,7 +176,7 @@ def test_the_paper_s_summary_by_hand():
         "symmetric": True,
     }
     c = {**b, "rotation_error_deg": 4.0, "translation_error": 0.07, "symmetric": False}
-    s = summarize([a, b, c])
+    s = summarize(_records(a, b, c))
     euler = np.array([1, -2, 2, 0, 180, -90, 0, 180, -90], float)
     trans = np.array([0.01, 0, -0.02, 0.3, -0.4, 0, 0.3, -0.4, 0])
     assert s["pairs"] == 3 and s["seconds_per_pair"] == pytest.approx(5 / 3)
@@ -188,12 +193,12 @@ def test_the_paper_s_summary_by_hand():
     kept = np.array([1, -2, 2, 0, 180, -90], float)  # a and c: b is a symmetric failure
     assert s["mae_r_not_symmetric"] == pytest.approx(np.mean(np.abs(kept)))
     # The thresholds are strict and can be moved.
-    assert summarize([a], rotation_tol=3.0)["success_rate"] == 0.0
-    assert summarize([a], translation_tol=0.03)["success_rate"] == 0.0
-    assert summarize([c], translation_tol=0.08)["success_rate"] == 1.0
+    assert summarize(_records(a), rotation_tol=3.0)["success_rate"] == 0.0
+    assert summarize(_records(a), translation_tol=0.03)["success_rate"] == 0.0
+    assert summarize(_records(c), translation_tol=0.08)["success_rate"] == 1.0
     unmarked = {k: v for k, v in a.items() if k != "symmetric"}
-    assert "success_rate_up_to_symmetry" not in summarize([unmarked])
-    only_symmetric = summarize([b])
+    assert "success_rate_up_to_symmetry" not in summarize(_records(unmarked))
+    only_symmetric = summarize(_records(b))
     assert only_symmetric["mae_r_not_symmetric"] == 0.0  # nothing left to average
 
 
@@ -217,12 +222,10 @@ def test_success_needs_5_degrees_and_5_centimetres_by_default():
         "translation_error": 0.0,
         "seconds": 1.0,
     }
-    assert summarize([near])["success_rate"] == 0.0
-    assert summarize([{**near, "rotation_error_deg": 4.9}])["success_rate"] == 1.0
-    assert (
-        summarize([{**near, "rotation_error_deg": 1.0, "translation_error": 0.051}])["success_rate"]
-        == 0.0
-    )
+    assert summarize(_records(near))["success_rate"] == 0.0
+    assert summarize(_records({**near, "rotation_error_deg": 4.9}))["success_rate"] == 1.0
+    far = {**near, "rotation_error_deg": 1.0, "translation_error": 0.051}
+    assert summarize(_records(far))["success_rate"] == 0.0
 
 
 def test_mcnemar_takes_successes_as_0_and_1_too():

@@ -11,12 +11,13 @@ from o3d_rpointhop.evaluation.metrics import (
     pair_errors,
     summarize,
 )
+from o3d_rpointhop.evaluation.records import PairRecord
 
 
 def _fake_results(seconds: float) -> dict:
     records = [
-        {**pair_errors(np.eye(4), np.eye(4)), "seconds": seconds, "pair": "a"},
-        {**pair_errors(np.eye(4), np.eye(4)), "seconds": 2 * seconds, "pair": "b"},
+        PairRecord(**pair_errors(np.eye(4), np.eye(4)), seconds=seconds, pair="a"),
+        PairRecord(**pair_errors(np.eye(4), np.eye(4)), seconds=2 * seconds, pair="b"),
     ]
     return {
         "dataset": "bunny",
@@ -31,7 +32,7 @@ def _fake_results(seconds: float) -> dict:
             "scans": {
                 "description": "two pairs",
                 "summary": {"icp": summarize(records)},
-                "records": {"icp": records},
+                "records": {"icp": [r.as_dict() for r in records]},
                 "fit_seconds": 10 * seconds,
             }
         },

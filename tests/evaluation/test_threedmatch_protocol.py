@@ -10,6 +10,7 @@ from helpers import motion_matrix
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop.datasets import load_3dmatch_pairs, make_room
+from o3d_rpointhop.evaluation.records import ScenePairRecord
 from o3d_rpointhop.evaluation.threedmatch import official_pairs, run_3dmatch, summarize_3dmatch
 from o3d_rpointhop.io import write_cloud
 from o3d_rpointhop.transforms import apply_transform
@@ -99,15 +100,19 @@ def test_a_run_keeps_every_estimate_and_reports_the_official_summary(folder):
 
 
 def _rec(scene, registered, re_te=None, claimed=None):
-    return {
-        "scene": scene,
-        "registered": registered,
-        "registered_re_te": registered if re_te is None else re_te,
-        "claimed": claimed,
-        "seconds": 1.0,
-        "rotation_error_deg": 1.0 if registered else 90.0,
-        "translation_error": 0.01 if registered else 1.0,
-    }
+    return ScenePairRecord(
+        pair="p",
+        scene=scene,
+        overlap=None,
+        rmse=0.1 if registered else 1.0,
+        registered=registered,
+        registered_re_te=registered if re_te is None else re_te,
+        claimed=claimed,
+        seconds=1.0,
+        rotation_error_deg=1.0 if registered else 90.0,
+        translation_error=0.01 if registered else 1.0,
+        transformation=np.eye(4).tolist(),
+    )
 
 
 def test_the_summary_averages_scenes_then_pairs_and_counts_claims():
@@ -120,7 +125,7 @@ def test_the_summary_averages_scenes_then_pairs_and_counts_claims():
         _rec("a", False, claimed=False),
         _rec("b", False, claimed=True),
     ]
-    theirs = [_rec("a", r["registered"] or k == 3) for k, r in enumerate(ours)]
+    theirs = [_rec("a", r.registered or k == 3) for k, r in enumerate(ours)]
     out = summarize_3dmatch({"ours": ours, "theirs": theirs})
     summary = out["summary"]["ours"]
     assert summary["registration_recall"] == pytest.approx(0.375)

@@ -91,3 +91,34 @@ def test_merging_meshing_and_the_summary_are_library_methods():
     assert len(summary["poses"]) == 3 and summary["edges"]
     with pytest.raises(ValueError, match="3 scans were registered, got 2"):
         result.merge(scans[:2])
+
+
+def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(monkeypatch):
+    """A descriptor that states the consensus and a cloud size (as the scene model does)
+    has its scan sets screened by the consensus at that size, as register() would."""
+    from o3d_rpointhop import FPFHTransformer
+    from o3d_rpointhop.registration import multiway
+    from o3d_rpointhop.registration.steps import ConsensusGlobal, RANSACGlobal
+
+    ran = []
+    for step in (ConsensusGlobal, RANSACGlobal):
+        real = step._run
+        monkeypatch.setattr(
+            step, "_run", lambda self, c, t, real=real: ran.append(type(self)) or real(self, c, t)
+        )
+    sizes = []
+    real_voxel = multiway.common_voxel
+    monkeypatch.setattr(
+        multiway, "common_voxel", lambda clouds, n: sizes.append(n) or real_voxel(clouds, n)
+    )
+    scans, truth = partial_views(3, seed=4)
+    stated = FPFHTransformer()
+    stated.registration_global_method_ = "consensus"
+    stated.registration_points_ = 1500
+    result = register_multiway(scans, stated, seed=0)
+    assert ran == [ConsensusGlobal] * 3 and sizes == [1500]
+    for k in (1, 2):
+        assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
+    ran.clear()
+    register_multiway(scans, FPFHTransformer(), seed=0)
+    assert ran == [RANSACGlobal] * 3

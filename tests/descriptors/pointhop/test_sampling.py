@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import random_motion, relative_difference
+from helpers import CONTRACT, random_motion, relative_difference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -84,9 +84,9 @@ def test_poisson_descriptors_are_rigid_invariant_and_permutation_equivariant(poi
     cloud = make_blob(700, shape_seed=40 + seed)
     base = poisson_model.transform(cloud)
     rot, shift = random_motion(seed, 100.0)
-    assert relative_difference(base, poisson_model.transform(cloud @ rot.T + shift)) < 1e-5
+    assert relative_difference(base, poisson_model.transform(cloud @ rot.T + shift)) < CONTRACT
     perm = np.random.default_rng(seed).permutation(len(cloud))
-    np.testing.assert_array_equal(poisson_model.transform(cloud[perm]), base[perm])
+    assert relative_difference(poisson_model.transform(cloud[perm]), base[perm]) < CONTRACT
     np.testing.assert_array_equal(poisson_model.transform(cloud), base)  # deterministic
 
 

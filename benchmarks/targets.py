@@ -1,0 +1,239 @@
+"""The speed targets table of docs/performance.md, from the benchmark result files.
+
+Every number is a ratio of medians measured in one run against the peer of that run
+(Open3D's FPFH, Open3D's recipe), read from ``benchmarks/results``:
+
+* describing: ``scaling.json`` (``benchmarks/scaling.py``);
+* ``register()`` on objects: ``modelnet40_timing_sample_timings.json`` (R-PointHop + RANSAC +
+  point-to-plane ICP, ``register()``'s path for the object model, against Open3D's
+  FPFH + RANSAC + ICP recipe, per-pair medians);
+* ``register()`` on scans: ``3dmatch_heldout_timing_sample_timings.json`` (the scene
+  model's defaults against the recipe at 5 cm);
+* ``register_multiway``: ``multiway_timings.json``;
+* start-up: ``startup.json``, measured by this script with ``--measure-startup``
+  (``o3d-rpointhop --help``, ``import o3d_rpointhop`` and ``import open3d``, each in a
+  fresh process, medians of five).
+
+Writes ``benchmarks/results/targets.md`` and replaces the table between the
+``<!-- targets:begin -->`` and ``<!-- targets:end -->`` lines of docs/performance.md.
+
+    python benchmarks/targets.py [--measure-startup]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+DOC = ROOT / "docs" / "performance.md"
+BEGIN, END = "<!-- targets:begin -->", "<!-- targets:end -->"
+
+
+def _load(name: str) -> dict | None:
+    path = RESULTS / name
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _verdict(values: list[float], target: float) -> str:
+    met = [v <= target for v in values]
+    if all(met):
+        return "met"
+    if not any(met):
+        return f"missed (worst {max(values) / target:.2f}x the target)"
+    return "met in part"
+
+
+def _median_ratio(records: dict, method: str, peer: str) -> float:
+    ours = statistics.median(r["seconds"] for r in records[method])
+    theirs = statistics.median(r["seconds"] for r in records[peer])
+    return ours / theirs
+
+
+def describing_rows() -> list[tuple[str, str, str]]:
+    scaling = _load("scaling.json")
+    if scaling is None:
+        return []
+    seconds = {(r["method"], r["points"]): r["seconds"] for r in scaling["rows"]}
+    sizes = sorted({p for _, p in seconds})
+
+    def ratios(method):
+        return [
+            (n, seconds[(method, n)] / seconds[("fpfh", n)])
+            for n in sizes
+            if (method, n) in seconds
+        ]
+
+    axes = ratios("rpointhop-128")
+    small = [r for n, r in axes if n < 200_000]
+    large = [r for n, r in axes if n >= 200_000]
+    text = " / ".join(f"{r:.2f}x" for _, r in axes)
+    points = " / ".join(f"{n // 1000}k" if n < 10**6 else f"{n // 10**6}M" for n, _ in axes)
+    rows = [
+        (
+            "describing, 128 axes, at most 1.0x Open3D FPFH below 200k points, 0.7x from 200k",
+            f"{text} at {points}",
+            "; ".join(
+                part
+                for part in (
+                    f"below 200k: {_verdict(small, 1.0)}" if small else "",
+                    f"from 200k: {_verdict(large, 0.7)}" if large else "",
+                )
+                if part
+            ),
+        )
+    ]
+    peaks = {r["method"]: r["peak_rss_mb"] for r in scaling["rows"] if r["points"] == 10**6}
+    if "rpointhop-128" in peaks:
+        peak = peaks["rpointhop-128"]
+        rows.append(
+            ("1M points within 2 GiB (128 axes)", f"{peak:.0f} MiB", _verdict([peak], 2048))
+        )
+    return rows
+
+
+def register_rows() -> list[tuple[str, str, str]]:
+    rows = []
+    objects = _load("modelnet40_timing_sample_timings.json")
+    if objects is not None:
+        names = ("resampled", "resampled-noise", "resampled-partial")
+        found = [
+            (
+                n,
+                _median_ratio(
+                    objects["protocols"][n]["records"], "rpointhop-ransac-icp", "fpfh-ransac-icp"
+                ),
+            )
+            for n in names
+            if n in objects["protocols"]
+        ]
+        if found:
+            rows.append(
+                (
+                    "`register()` on ModelNet40 pairs at most 0.7x Open3D's FPFH + RANSAC + "
+                    "ICP recipe",
+                    " / ".join(f"{r:.2f}x" for _, r in found)
+                    + " ("
+                    + " / ".join(n for n, _ in found)
+                    + ")",
+                    _verdict([r for _, r in found], 0.7),
+                )
+            )
+    scenes = _load("3dmatch_heldout_timing_sample_timings.json")
+    if scenes is not None:
+        found = [
+            (name, _median_ratio(p["records"], "rpointhop-scene", "fpfh-ransac-icp-5cm"))
+            for name, p in scenes["protocols"].items()
+            if "rpointhop-scene" in p["records"]
+        ]
+        consensus = [
+            (
+                name,
+                _median_ratio(p["records"], "fpfh-pipeline-consensus-icp", "fpfh-ransac-icp-5cm"),
+            )
+            for name, p in scenes["protocols"].items()
+            if "fpfh-pipeline-consensus-icp" in p["records"]
+        ]
+        rows.append(
+            (
+                "`register()` on 3DMatch fragments (scene model) at most 0.7x the recipe",
+                " / ".join(f"{r:.2f}x" for _, r in found)
+                + " ("
+                + " / ".join(n for n, _ in found)
+                + ")",
+                _verdict([r for _, r in found], 0.7),
+            )
+        )
+        if consensus:
+            rows.append(
+                (
+                    "FPFH through this library's consensus + ICP on 3DMatch fragments, at "
+                    "most 0.8x the recipe",
+                    " / ".join(f"{r:.2f}x" for _, r in consensus),
+                    _verdict([r for _, r in consensus], 0.8),
+                )
+            )
+    multiway = _load("multiway_timings.json")
+    if multiway is not None:
+        found = [
+            (name, o["methods"]["rpointhop"]["seconds"] / o["methods"]["open3d-recipe"]["seconds"])
+            for name, o in multiway["objects"].items()
+        ]
+        rows.append(
+            (
+                "`register_multiway` at most 0.5x Open3D's multiway recipe",
+                " / ".join(f"{name} {r:.2f}x" for name, r in found),
+                _verdict([r for _, r in found], 0.5),
+            )
+        )
+    return rows
+
+
+def _median_seconds(code: list[str], repeats: int = 5) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        subprocess.run(code, check=True, capture_output=True)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def measure_startup() -> dict:
+    python = sys.executable
+    script = Path(python).with_name("o3d-rpointhop")
+    return {
+        "help_seconds": _median_seconds([str(script), "--help"]),
+        "import_seconds": _median_seconds([python, "-c", "import o3d_rpointhop"]),
+        "import_open3d_seconds": _median_seconds([python, "-c", "import open3d"]),
+    }
+
+
+def startup_rows() -> list[tuple[str, str, str]]:
+    startup = _load("startup.json")
+    if startup is None:
+        return []
+    help_s, ours, open3d = (
+        startup["help_seconds"],
+        startup["import_seconds"],
+        startup["import_open3d_seconds"],
+    )
+    return [
+        (
+            "`o3d-rpointhop --help` under 1 s; `import o3d_rpointhop` faster than `import open3d`",
+            f"{help_s:.2f} s; {ours:.2f} s against {open3d:.2f} s",
+            "met" if help_s < 1.0 and ours < open3d else "missed",
+        )
+    ]
+
+
+def table() -> str:
+    rows = describing_rows() + register_rows() + startup_rows()
+    lines = ["| target | measured | |", "|---|---|---|"]
+    lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--measure-startup", action="store_true")
+    args = parser.parse_args()
+    if args.measure_startup:
+        (RESULTS / "startup.json").write_text(json.dumps(measure_startup(), indent=1) + "\n")
+    text = table()
+    (RESULTS / "targets.md").write_text("# Speed targets (benchmarks/targets.py)\n\n" + text)
+    doc = DOC.read_text()
+    if BEGIN in doc and END in doc:
+        head, rest = doc.split(BEGIN, 1)
+        _, tail = rest.split(END, 1)
+        DOC.write_text(f"{head}{BEGIN}\n{text}{END}{tail}")
+    print(text, end="")
+
+
+if __name__ == "__main__":
+    main()
