@@ -71,22 +71,30 @@ def describing_rows() -> list[tuple[str, str, str]]:
         ]
 
     axes = ratios("rpointhop-128")
-    small = [r for n, r in axes if n < 200_000]
-    large = [r for n, r in axes if n >= 200_000]
+
+    def label(n):
+        return f"{n // 1000}k" if n < 10**6 else f"{n // 10**6}M"
+
     text = " / ".join(f"{r:.2f}x" for _, r in axes)
-    points = " / ".join(f"{n // 1000}k" if n < 10**6 else f"{n // 10**6}M" for n, _ in axes)
+    met = [label(n) for n, r in axes if r <= (1.0 if n < 200_000 else 0.7)]
+    missed = [
+        f"{label(n)} ({r / (1.0 if n < 200_000 else 0.7):.2f}x the target)"
+        for n, r in axes
+        if r > (1.0 if n < 200_000 else 0.7)
+    ]
+    verdict = "; ".join(
+        part
+        for part in (
+            f"met at {', '.join(met)}" if met else "",
+            f"missed at {', '.join(missed)}" if missed else "",
+        )
+        if part
+    )
     rows = [
         (
             "describing, 128 axes, at most 1.0x Open3D FPFH below 200k points, 0.7x from 200k",
-            f"{text} at {points}",
-            "; ".join(
-                part
-                for part in (
-                    f"below 200k: {_verdict(small, 1.0)}" if small else "",
-                    f"from 200k: {_verdict(large, 0.7)}" if large else "",
-                )
-                if part
-            ),
+            f"{text} at {' / '.join(label(n) for n, _ in axes)}",
+            verdict,
         )
     ]
     peaks = {r["method"]: r["peak_rss_mb"] for r in scaling["rows"] if r["points"] == 10**6}

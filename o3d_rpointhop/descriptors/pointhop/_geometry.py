@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..._utils.compiled import kernel
 from ..._utils.threads import even_chunks, map_threads
 from ._attributes import ATTRIBUTE_CHANNELS, eigen_features
 from ._config import HopConfig
@@ -294,7 +295,7 @@ def _neighbour_attributes(
         for name in attributes[1:]:
             if name == "normal":
                 # Neighbour j's normal (third axis of its frame) in query i's frame.
-                values = np.einsum("qkd,qdj->jqk", frames[nb, :, 2], frames[queries[lo:hi]])
+                values = _normals_in_frames(frames, nb, queries[lo:hi])
                 if config.pooling == "azimuth":
                     values = _about_the_normal(values, points, queries[lo:hi], nb, frames)
             else:
@@ -303,6 +304,25 @@ def _neighbour_attributes(
         out[lo:hi] = np.hstack(blocks)
 
     map_threads(chunk, _chunks(len(queries), n_threads), n_threads)
+    return out
+
+
+@kernel(nogil=True)
+def _normals_in_frames(frames, neighbours, queries):  # pragma: no cover - compiled
+    """Neighbour ``neighbours[q, k]``'s normal (the third axis of its frame) in query
+    ``queries[q]``'s frame, ``(3, q, k)``: component ``j`` is summed ``(n0 f0j + n1 f1j)
+    + n2 f2j``, the order numpy's einsum ``"qkd,qdj->jqk"`` takes (the same bytes),
+    without gathering every neighbour's frame first. Runs without the GIL, so the
+    chunks' threads share it."""
+    q, k = neighbours.shape
+    out = np.empty((3, q, k))
+    for a in range(q):
+        f = frames[queries[a]]
+        for b in range(k):
+            n = frames[neighbours[a, b]]
+            n0, n1, n2 = n[0, 2], n[1, 2], n[2, 2]
+            for j in range(3):
+                out[j, a, b] = (n0 * f[0, j] + n1 * f[1, j]) + n2 * f[2, j]
     return out
 
 
