@@ -128,6 +128,26 @@ def _octant_sums(values, octant):  # pragma: no cover - compiled
     return sums, counts
 
 
+#: Neighbour values from which :func:`octant_means` sums with its compiled kernel
+#: (both ways give the same bytes): below, numpy's bincount is as quick, and an object
+#: of a few thousand points (``register()``'s first call in a new environment) does
+#: not wait for the kernel to compile (about 1 s, once).
+COMPILED_FROM = 1 << 19
+
+
+def _octant_sums_numpy(values: np.ndarray, octant: np.ndarray):
+    """:func:`_octant_sums` with ``numpy.bincount`` (the same bytes)."""
+    c, q, _ = values.shape
+    rows = (octant.astype(np.int64) * q + np.arange(q)[:, None]).ravel()
+    counts = np.bincount(rows, minlength=N_OCTANTS * q).reshape(N_OCTANTS, q)
+    sums = np.empty((c, N_OCTANTS, q))
+    for d in range(c):
+        sums[d] = np.bincount(rows, weights=values[d].ravel(), minlength=N_OCTANTS * q).reshape(
+            N_OCTANTS, q
+        )
+    return sums, counts
+
+
 def octant_means(values: np.ndarray, octant: np.ndarray) -> np.ndarray:
     """Octant means of per-neighbour values: coordinates, normals, eigen features.
 
@@ -145,7 +165,10 @@ def octant_means(values: np.ndarray, octant: np.ndarray) -> np.ndarray:
         octant ``o``; an empty octant takes the mean of the whole neighbourhood.
     """
     c, q, _ = values.shape
-    sums, counts = _octant_sums(values, octant)
+    if values.size >= COMPILED_FROM:
+        sums, counts = _octant_sums(values, octant)
+    else:
+        sums, counts = _octant_sums_numpy(values, octant)
     out = np.empty((q, N_OCTANTS, c))
     empty = counts == 0
     for d in range(c):
