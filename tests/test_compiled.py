@@ -89,3 +89,19 @@ def test_popcount_counts_the_set_bits_of_a_word():
     assert [compiled.popcount(int(w)) for w in words[:4]] == [0, 1, 1, 64]
     kernel = compiled.kernel()(_popcounts)
     np.testing.assert_array_equal(kernel(words), expected)
+
+
+def test_describing_an_object_does_not_load_numba():
+    """xyz-only models stay in numpy (numba's libraries are about 100 MiB); the scene
+    attributes' kernels load it."""
+    code = (
+        "import sys\n"
+        "from o3d_rpointhop import RPointHopTransformer\n"
+        "from o3d_rpointhop.datasets import make_object\n"
+        "RPointHopTransformer.pretrained(n_components=32).transform(make_object(1200))\n"
+        "print('numba' in sys.modules)\n"
+        "RPointHopTransformer.pretrained('scene').transform(make_object(1200))\n"
+        "print('numba' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "True"]

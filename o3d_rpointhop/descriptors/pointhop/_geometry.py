@@ -155,7 +155,8 @@ def build_geometry(
     k_all = max([k_lrf] + [config.n_neighbors[h] + 1 for h in full])
     # Hop 1's neighbours are pooled into its attributes right away; the scene
     # attributes need them again once every frame is known.
-    keep = [h for h in full if h > 0 or len(config.attributes) > 1]
+    scene = len(config.attributes) > 1  # the scene attributes: compiled kernels
+    keep = [h for h in full if h > 0 or scene]
     octants = [None] * n_hops
     neighbours = [None] * n_hops
     for h in keep:
@@ -194,7 +195,7 @@ def build_geometry(
                 neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
             if h == 0:
                 values = cylindrical(block) if config.pooling == "azimuth" else block
-                hop1_sums[lo:hi] = octant_means(values, octant)
+                hop1_sums[lo:hi] = octant_means(values, octant, compiled=scene)
 
     map_threads(full_chunk, _chunks(n, n_threads), n_threads)
     del index, full_chunk  # the whole cloud's k-d tree
@@ -300,7 +301,7 @@ def _neighbour_attributes(
                     values = _about_the_normal(values, points, queries[lo:hi], nb, frames)
             else:
                 values = np.moveaxis(features[nb], 2, 0)  # (7, q, k)
-            blocks.append(octant_means(values, octant))
+            blocks.append(octant_means(values, octant, compiled=True))
         out[lo:hi] = np.hstack(blocks)
 
     map_threads(chunk, _chunks(len(queries), n_threads), n_threads)

@@ -128,13 +128,6 @@ def _octant_sums(values, octant):  # pragma: no cover - compiled
     return sums, counts
 
 
-#: Neighbour values from which :func:`octant_means` sums with its compiled kernel
-#: (both ways give the same bytes): below, numpy's bincount is as quick, and an object
-#: of a few thousand points (``register()``'s first call in a new environment) does
-#: not wait for the kernel to compile (about 1 s, once).
-COMPILED_FROM = 1 << 19
-
-
 def _octant_sums_numpy(values: np.ndarray, octant: np.ndarray):
     """:func:`_octant_sums` with ``numpy.bincount`` (the same bytes)."""
     c, q, _ = values.shape
@@ -148,7 +141,7 @@ def _octant_sums_numpy(values: np.ndarray, octant: np.ndarray):
     return sums, counts
 
 
-def octant_means(values: np.ndarray, octant: np.ndarray) -> np.ndarray:
+def octant_means(values: np.ndarray, octant: np.ndarray, compiled: bool = False) -> np.ndarray:
     """Octant means of per-neighbour values: coordinates, normals, eigen features.
 
     Parameters
@@ -157,6 +150,13 @@ def octant_means(values: np.ndarray, octant: np.ndarray) -> np.ndarray:
         ``c`` channels of every neighbour of every query, as planes.
     octant : ndarray of shape (q, k)
         From :func:`octant_index`.
+    compiled : bool, default=False
+        Sum with the compiled kernel (:func:`_octant_sums`) rather than numpy's
+        bincount: the same bytes. The scene attributes, which load numba for their
+        normals anyway, take it (faster, and it releases the GIL for the chunks'
+        threads); a transform of xyz alone keeps numpy, so that it never loads numba
+        (about 100 MiB of libraries, and a second to compile in a new environment, for
+        a few per cent at best).
 
     Returns
     -------
@@ -165,7 +165,7 @@ def octant_means(values: np.ndarray, octant: np.ndarray) -> np.ndarray:
         octant ``o``; an empty octant takes the mean of the whole neighbourhood.
     """
     c, q, _ = values.shape
-    if values.size >= COMPILED_FROM:
+    if compiled:
         sums, counts = _octant_sums(values, octant)
     else:
         sums, counts = _octant_sums_numpy(values, octant)
