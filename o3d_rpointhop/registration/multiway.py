@@ -4,16 +4,16 @@ Every scan is prepared once (:mod:`.prepared`): downsampled to one common resolu
 described, and given normals. Candidate pairs (all pairs of a few scans; for many
 scans, each scan's nearest neighbours by a pooled descriptor) are screened through
 :class:`~o3d_rpointhop.RegistrationPipeline` on a context whose only clouds are the
-prepared ones, with ``register()``'s global step (descriptor matches, RANSAC),
-centring, resolution rules and flags, and one point-to-plane ICP pass at the common
-resolution, then measured there (fitness and Open3D's information matrix at the
-settings' ``edge_distance``). Pairs that fit become
+prepared ones, with ``register()``'s global step (descriptor matches, then RANSAC, or
+the step the descriptor states), centring, resolution rules and flags, and one
+point-to-plane ICP pass at the common resolution, then measured there (fitness and
+Open3D's information matrix at the settings' ``edge_distance``). Pairs that fit become
 edges of an Open3D ``PoseGraph``: a maximum spanning tree of the best edges gives the
 starting poses and is kept as certain, every other edge is a loop closure that Open3D's
 Levenberg-Marquardt optimisation may prune (line process; :mod:`.pose_graph`). The
 optimised poses are refined once more (every kept edge re-registered by
-``register()``'s ICP from them, ending on the full scans, then optimised again).
-Scans that no kept edge joins to scan 0 are reported as unconnected and get no pose.
+``register()``'s ICP from them, ending on the full scans, then optimised again). Scans
+that no kept edge joins to scan 0 are reported as unconnected and get no pose.
 """
 
 from __future__ import annotations
