@@ -77,3 +77,20 @@ def test_ratio_and_top_k_filters_follow_the_paper():
 def test_correspondence_bad_input(kwargs, message):
     with pytest.raises(ValueError, match=message):
         find_correspondences(**kwargs)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_compiled_candidates_are_the_argmin_passes(dtype, monkeypatch):
+    """Large distance blocks take their candidates from one compiled pass per row: the
+    same columns, in the same order (value, then index), as the argmin passes."""
+    from o3d_rpointhop.registration import correspondences as module
+
+    rng = np.random.default_rng(1)
+    values = rng.normal(size=(120, 333)).astype(dtype)
+    values[:, 7] = values[:, 2]  # ties go to the lower index
+    values[5] = 1.0  # a row of ties
+    monkeypatch.setattr(module, "COMPILED_FROM", 1 << 60)
+    passes = module._smallest(values.copy(), 4)
+    monkeypatch.setattr(module, "COMPILED_FROM", 0)
+    np.testing.assert_array_equal(module._smallest(values.copy(), 4), passes)
+    np.testing.assert_array_equal(passes[5], [0, 1, 2, 3])
