@@ -20,8 +20,9 @@ largest, densest cluster. The kernel
    residuals ``r`` of the matches;
 6. refits the winner on its inliers while that gathers more of them.
 
-Steps 1, 3 and 5 are compiled (numba, :mod:`o3d_rpointhop._utils.compiled`); the
-scoring runs on ``n_threads`` threads, each hypothesis summed in one fixed order, so the
+Steps 1, 3 and 5 are compiled (numba, :mod:`o3d_rpointhop._utils.compiled`) and run
+on ``n_threads`` threads: the graph's rows, the seeds' blocks and the hypotheses'
+blocks are shared out, each row, set and sum computed in one fixed order, so the
 result does not depend on the thread count. Deterministic: no random draw; ties go to
 the lower index.
 """
