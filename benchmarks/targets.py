@@ -106,67 +106,60 @@ def describing_rows() -> list[tuple[str, str, str]]:
     return rows
 
 
+def _pair_row(label, protocols, method, peer, target, names=None, show_names=True):
+    """A target row for ``method`` against ``peer`` on every protocol of a timings file
+    that ran it (``names``: those protocols, in order; default: all); None without
+    any."""
+    names = names or list(protocols)
+    found = [
+        (n, _median_ratio(protocols[n]["records"], method, peer))
+        for n in names
+        if n in protocols and method in protocols[n]["records"]
+    ]
+    if not found:
+        return None
+    text = " / ".join(f"{r:.2f}x" for _, r in found)
+    if show_names:
+        text += " (" + " / ".join(n for n, _ in found) + ")"
+    return label, text, _verdict([r for _, r in found], target)
+
+
 def register_rows() -> list[tuple[str, str, str]]:
     rows = []
     objects = _load("modelnet40_timing_sample_timings.json")
     if objects is not None:
-        names = ("resampled", "resampled-noise", "resampled-partial")
-        found = [
-            (
-                n,
-                _median_ratio(
-                    objects["protocols"][n]["records"], "rpointhop-ransac-icp", "fpfh-ransac-icp"
-                ),
-            )
-            for n in names
-            if n in objects["protocols"]
-        ]
-        if found:
-            rows.append(
-                (
-                    "`register()` on ModelNet40 pairs at most 0.7x Open3D's FPFH + RANSAC + "
-                    "ICP recipe",
-                    " / ".join(f"{r:.2f}x" for _, r in found)
-                    + " ("
-                    + " / ".join(n for n, _ in found)
-                    + ")",
-                    _verdict([r for _, r in found], 0.7),
-                )
-            )
-    scenes = _load("3dmatch_heldout_timing_sample_timings.json")
-    if scenes is not None:
-        found = [
-            (name, _median_ratio(p["records"], "rpointhop-scene", "fpfh-ransac-icp-5cm"))
-            for name, p in scenes["protocols"].items()
-            if "rpointhop-scene" in p["records"]
-        ]
-        consensus = [
-            (
-                name,
-                _median_ratio(p["records"], "fpfh-pipeline-consensus-icp", "fpfh-ransac-icp-5cm"),
-            )
-            for name, p in scenes["protocols"].items()
-            if "fpfh-pipeline-consensus-icp" in p["records"]
-        ]
         rows.append(
-            (
-                "`register()` on 3DMatch fragments (scene model) at most 0.7x the recipe",
-                " / ".join(f"{r:.2f}x" for _, r in found)
-                + " ("
-                + " / ".join(n for n, _ in found)
-                + ")",
-                _verdict([r for _, r in found], 0.7),
+            _pair_row(
+                "`register()` on ModelNet40 pairs at most 0.7x Open3D's FPFH + RANSAC + ICP recipe",
+                objects["protocols"],
+                "rpointhop-ransac-icp",
+                "fpfh-ransac-icp",
+                0.7,
+                names=["resampled", "resampled-noise", "resampled-partial"],
             )
         )
-        if consensus:
-            rows.append(
-                (
-                    "FPFH through this library's consensus + ICP on 3DMatch fragments, at "
-                    "most 0.8x the recipe",
-                    " / ".join(f"{r:.2f}x" for _, r in consensus),
-                    _verdict([r for _, r in consensus], 0.8),
-                )
+    scenes = _load("3dmatch_heldout_timing_sample_timings.json")
+    if scenes is not None:
+        rows.append(
+            _pair_row(
+                "`register()` on 3DMatch fragments (scene model) at most 0.7x the recipe",
+                scenes["protocols"],
+                "rpointhop-scene",
+                "fpfh-ransac-icp-5cm",
+                0.7,
             )
+        )
+        rows.append(
+            _pair_row(
+                "FPFH through this library's consensus + ICP on 3DMatch fragments, at "
+                "most 0.8x the recipe",
+                scenes["protocols"],
+                "fpfh-pipeline-consensus-icp",
+                "fpfh-ransac-icp-5cm",
+                0.8,
+                show_names=False,
+            )
+        )
     multiway = _load("multiway_timings.json")
     if multiway is not None:
         found = [
@@ -180,7 +173,7 @@ def register_rows() -> list[tuple[str, str, str]]:
                 _verdict([r for _, r in found], 0.5),
             )
         )
-    return rows
+    return [row for row in rows if row is not None]
 
 
 def _median_seconds(code: list[str], repeats: int = 5) -> float:

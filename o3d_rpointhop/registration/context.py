@@ -19,7 +19,7 @@ from .._utils.validation import as_viewpoints
 from ..open3d_interop import to_point_cloud
 from .checks import check_geometry
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
-from .prepared import PreparedCloud
+from .prepared import PreparedCloud, estimate_normals
 from .result import StepResult
 from .settings import RegistrationSettings, resolve_voxel_size
 
@@ -257,7 +257,7 @@ class RegistrationContext:
         key = (which, round(radius, 12), len(cloud.points))
         if key not in self._normals:
             copy = o3d.geometry.PointCloud(cloud)
-            copy.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
+            estimate_normals(copy, radius)
             self._normals[key] = copy
         return self._normals[key]
 

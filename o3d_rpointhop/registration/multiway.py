@@ -35,7 +35,7 @@ from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method, resolve_global_points
 from .pipeline import GLOBAL_METHODS, RegistrationPipeline
 from .pose_graph import optimise, poses_from_tree, spanning_tree
-from .prepared import PreparedCloud, common_voxel, prepare_cloud
+from .prepared import PreparedCloud, common_voxel, estimate_normals, prepare_cloud
 from .result import MultiwayResult
 from .settings import RegistrationSettings
 from .steps import PointToPlaneICP
@@ -131,12 +131,11 @@ def _register_pair(
 
 def _full_normals(points: np.ndarray, settings: RegistrationSettings) -> np.ndarray:
     """A full scan's normals as a pair's context estimates them for its target (in the
-    frame centred on the scan's centroid, within the settings' normal radius, at most
-    30 neighbours): estimated once per scan instead of once per edge."""
+    frame centred on the scan's centroid, :func:`~.prepared.estimate_normals` at the
+    settings' normal radius): estimated once per scan instead of once per edge."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     cloud.translate(-cloud.get_center())
-    search = o3d.geometry.KDTreeSearchParamHybrid(radius=settings.normal_radius, max_nn=30)
-    cloud.estimate_normals(search)
+    estimate_normals(cloud, settings.normal_radius)
     return np.asarray(cloud.normals).copy()
 
 

@@ -18,7 +18,16 @@ import open3d as o3d
 
 from .._utils.geometry import point_spacing
 
-__all__ = ["PreparedCloud", "common_voxel", "prepare_cloud"]
+__all__ = [
+    "NORMAL_NEIGHBOURS",
+    "PreparedCloud",
+    "common_voxel",
+    "estimate_normals",
+    "prepare_cloud",
+]
+
+#: Most neighbours a normal is fitted to (within the settings' normal radius).
+NORMAL_NEIGHBOURS = 30
 
 
 @dataclass
@@ -61,6 +70,14 @@ class PreparedCloud:
                 )
 
 
+def estimate_normals(cloud: o3d.geometry.PointCloud, radius: float) -> None:
+    """``cloud``'s normals, in place, as every registration estimates them: within
+    ``radius``, at most :data:`NORMAL_NEIGHBOURS` neighbours (each point's own fit, the
+    same on any thread count)."""
+    search = o3d.geometry.KDTreeSearchParamHybrid(radius=float(radius), max_nn=NORMAL_NEIGHBOURS)
+    cloud.estimate_normals(search)
+
+
 def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
     """One resolution for every scan: the largest that any scan needs, its own spacing
     widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
@@ -79,8 +96,8 @@ def prepare_cloud(
 ) -> PreparedCloud:
     """A scan voxel-downsampled at ``voxel``; with ``descriptor``, described (seen from
     ``viewpoint``, the scan's sensor position in its own coordinates, when given); with
-    ``normal_radius``, with normals estimated as the registration context estimates them
-    (within that radius, at most 30 neighbours).
+    ``normal_radius``, with normals estimated within that radius
+    (:func:`estimate_normals`, as the registration context estimates them).
 
     The grid is laid about the scan's own centroid, so that nothing is lost far from
     the origin; the points come back in the scan's coordinates.
@@ -90,8 +107,7 @@ def prepare_cloud(
     down = down.voxel_down_sample(voxel)
     normals = None
     if normal_radius is not None:
-        search = o3d.geometry.KDTreeSearchParamHybrid(radius=float(normal_radius), max_nn=30)
-        down.estimate_normals(search)  # each point's own: the same on any thread count
+        estimate_normals(down, normal_radius)
         normals = np.asarray(down.normals).copy()
     kept = np.asarray(down.points) + origin
     features = None
