@@ -91,8 +91,7 @@ def test_the_refits_are_least_squares_fits_on_the_inliers():
     """From a slightly wrong hypothesis, the refit on the matches is the least-squares
     fit on the true matches (the only ones within the threshold), and the refit on the
     clouds the least-squares fit on their nearest-neighbour pairs."""
-    from scipy.spatial import cKDTree
-
+    from o3d_rpointhop._utils.cells import CellGrid
     from o3d_rpointhop.registration.steps._ransac import _refit_on_clouds, _refit_on_matches
     from o3d_rpointhop.transforms import rigid_transform
 
@@ -110,20 +109,19 @@ def test_the_refits_are_least_squares_fits_on_the_inliers():
 
     cloud = rng.uniform(-1, 1, (300, 3))  # sparse: every nearest neighbour is the partner
     moved = apply_transform(cloud, truth) + rng.normal(scale=0.001, size=cloud.shape)
-    fitted = _refit_on_clouds(start, (cloud, moved), 0.01, cKDTree(moved))
+    fitted = _refit_on_clouds(start, (cloud, moved), CellGrid(moved, 0.01))
     np.testing.assert_allclose(fitted, rigid_transform(cloud, moved), atol=1e-9)
 
 
 def test_verification_ranks_by_fitness_then_rmse_then_order():
-    from scipy.spatial import cKDTree
-
+    from o3d_rpointhop._utils.cells import CellGrid
     from o3d_rpointhop.registration.steps._ransac import _verify
 
     rng = np.random.default_rng(2)
     cloud = rng.uniform(-1, 1, (1500, 3))
     truth = motion_matrix(*random_motion(6, 0.3))
     moved = apply_transform(cloud, truth)
-    tree = cKDTree(moved)
+    grid = CellGrid(moved, 0.01)
 
     def hypothesis(shift):
         t = truth.copy()
@@ -139,5 +137,5 @@ def test_verification_ranks_by_fitness_then_rmse_then_order():
     ]
     rot = np.array([c[:3, :3] for c in candidates])
     shift = np.array([c[:3, 3] for c in candidates])
-    assert _verify(rot, shift, (cloud, moved), 0.01, tree) == 2
-    assert _verify(rot[[0, 4, 1]], shift[[0, 4, 1]], (cloud, moved), 0.01, tree) == 2
+    assert _verify(rot, shift, (cloud, moved), grid) == 2
+    assert _verify(rot[[0, 4, 1]], shift[[0, 4, 1]], (cloud, moved), grid) == 2

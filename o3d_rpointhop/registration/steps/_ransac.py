@@ -21,8 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from ..._utils.cells import CellGrid
 from ..._utils.compiled import kernel
 from ...transforms import rigid_transform, rigid_transforms
 from ._refit import refit_while_growing
@@ -138,14 +138,12 @@ def _needed(ratio: float, confidence: float, sample: int) -> float:
     return np.log(1.0 - confidence) / np.log1p(-good)
 
 
-def _verify(rot, shift, clouds, threshold: float, tree: cKDTree) -> int:
+def _verify(rot, shift, clouds, grid: CellGrid) -> int:
     """Index of the hypothesis with the best fitness, then inlier RMSE, on whole clouds
     (the first on a tie)."""
     source = clouds[0]
-    # Every hypothesis's moved cloud in one query, on all cores: each point's nearest
-    # neighbour does not depend on how the points are shared out.
     moved = _moved_clouds(rot, shift, source)
-    dist, _ = tree.query(moved.reshape(-1, 3), distance_upper_bound=threshold, workers=-1)
+    dist, _ = grid.nearest(moved.reshape(-1, 3))
     dist = dist.reshape(len(rot), len(source))
     inside = np.isfinite(dist)
     fitness = inside.mean(axis=1)
@@ -156,15 +154,15 @@ def _verify(rot, shift, clouds, threshold: float, tree: cKDTree) -> int:
     return int(np.lexsort((rmse, -fitness))[0])
 
 
-def _refit_on_clouds(transformation, clouds, threshold: float, tree: cKDTree, rounds: int = 5):
-    """Refit on the clouds' nearest-neighbour pairs within ``threshold`` (as Open3D's
-    RANSAC finishes), while that gathers more pairs."""
+def _refit_on_clouds(transformation, clouds, grid: CellGrid, rounds: int = 5):
+    """Refit on the clouds' nearest-neighbour pairs within the grid's radius (as
+    Open3D's RANSAC finishes), while that gathers more pairs."""
     source = clouds[0]
     best = transformation
     count = -1
     for _ in range(rounds):
         moved = source @ best[:3, :3].T + best[:3, 3]
-        dist, idx = tree.query(moved, distance_upper_bound=threshold)
+        dist, idx = grid.nearest(moved)
         inside = np.isfinite(dist)
         if inside.sum() < 3 or inside.sum() <= count:
             break
@@ -285,10 +283,10 @@ def ransac(
     if not len(pool_count):  # no sample passed the checkers: no estimate
         pass
     elif clouds is not None:
-        tree = cKDTree(clouds[1])
-        best = _verify(pool_rot, pool_shift, clouds, threshold, tree)
+        grid = CellGrid(clouds[1], threshold)
+        best = _verify(pool_rot, pool_shift, clouds, grid)
         transformation[:3, :3], transformation[:3, 3] = pool_rot[best], pool_shift[best]
-        transformation = _refit_on_clouds(transformation, clouds, threshold, tree)
+        transformation = _refit_on_clouds(transformation, clouds, grid)
     else:
         transformation[:3, :3], transformation[:3, 3] = pool_rot[0], pool_shift[0]
         transformation = _refit_on_matches(transformation, planes, sq_threshold, source, target)
