@@ -68,3 +68,16 @@ def test_agrees_with_the_tree_at_any_scale_and_offset(seed, scale, offset):
     expected_dist, expected_index = _tree_answer(points, queries, radius)
     np.testing.assert_array_equal(dist, expected_dist)
     np.testing.assert_array_equal(index, expected_index)
+
+
+def test_a_radius_tiny_against_the_cloud_takes_the_tree():
+    """1e13 cells per axis would overflow the grid's integer keys: the tree answers."""
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1e6, 1e6, (100, 3))
+    queries = points + rng.normal(scale=1e-8, size=points.shape)
+    grid = CellGrid(points, 1e-7)
+    assert grid._tree is not None
+    dist, index = grid.nearest(queries)
+    expected_dist, expected_index = _tree_answer(points, queries, 1e-7)
+    np.testing.assert_array_equal(dist, expected_dist)
+    np.testing.assert_array_equal(index, expected_index)

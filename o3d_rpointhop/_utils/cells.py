@@ -19,8 +19,8 @@ from .compiled import kernel
 
 __all__ = ["CellGrid"]
 
-#: Most cells a grid allocates (an int32 start per cell); wider clouds, relative to the
-#: radius, are searched with a k-d tree instead.
+#: Most cells a grid allocates (an int64 start per cell: 32 MiB at most); clouds wider
+#: than that, relative to the radius, are searched with a k-d tree instead.
 MAX_CELLS = 1 << 22
 
 # Cells a hair wider than the radius: a pair closer than the radius then never lies
@@ -68,7 +68,7 @@ def _nearest_in_cells(
 
 
 class CellGrid:
-    """The points within ``radius`` of queries, nearest first, on a grid of cells.
+    """Each query's nearest point closer than ``radius``, looked up on a grid of cells.
 
     Parameters
     ----------
@@ -84,12 +84,14 @@ class CellGrid:
         self.n_points = len(points)
         lo = points.min(axis=0) if len(points) else np.zeros(3)
         inv_cell = 1.0 / (self.radius * _WIDEN)
-        keys = np.floor((points - lo) * inv_cell).astype(np.int64)
-        dims = keys.max(axis=0) + 1 if len(points) else np.ones(3, dtype=np.int64)
+        cells = np.floor((points - lo) * inv_cell)  # float: no integer overflow yet
+        extent = cells.max(axis=0) + 1 if len(points) else np.ones(3)
         self._tree = None
-        if float(np.prod(dims.astype(np.float64))) > MAX_CELLS:
+        if float(np.prod(extent)) > MAX_CELLS:
             self._tree = cKDTree(points)
             return
+        keys = cells.astype(np.int64)
+        dims = extent.astype(np.int64)
         linear = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
         order = np.argsort(linear, kind="stable")
         counts = np.bincount(linear, minlength=int(np.prod(dims)))
