@@ -91,17 +91,34 @@ def test_popcount_counts_the_set_bits_of_a_word():
     np.testing.assert_array_equal(kernel(words), expected)
 
 
-def test_describing_an_object_does_not_load_numba():
-    """xyz-only models stay in numpy (numba's libraries are about 100 MiB); the scene
-    attributes' kernels load it."""
-    code = (
-        "import sys\n"
-        "from o3d_rpointhop import RPointHopTransformer\n"
-        "from o3d_rpointhop.datasets import make_object\n"
-        "RPointHopTransformer.pretrained(n_components=32).transform(make_object(1200))\n"
-        "print('numba' in sys.modules)\n"
-        "RPointHopTransformer.pretrained('scene').transform(make_object(1200))\n"
-        "print('numba' in sys.modules)\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["False", "True"]
+def _outer(values):  # pragma: no cover - compiled
+    return _inner(values) + 1.0
+
+
+def _inner_function(values):  # pragma: no cover - compiled
+    return values.sum()
+
+
+_inner = compiled.kernel(inline="always")(_inner_function)
+
+
+def test_a_kernel_calls_other_kernels():
+    outer = compiled.kernel()(_outer)
+    assert outer(np.arange(4.0)) == 7.0
+    assert _inner(np.ones(3)) == 3.0  # still callable from Python once bound
+
+
+def test_the_cache_folder_is_named_after_every_kernel_module_s_source(tmp_path, monkeypatch):
+    """A kernel calls helpers from other files, and numba checks a cached kernel
+    against its own file only: so the folder changes with any kernel module."""
+    import numba
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    before = numba.config.CACHE_DIR
+    with compiled._cache_folder(numba):
+        folder = numba.config.CACHE_DIR
+    assert numba.config.CACHE_DIR == before  # the user's setting is back
+    assert folder == str(tmp_path / "o3d-rpointhop" / f"kernels-{compiled._sources_key()}")
+    monkeypatch.setattr(compiled, "_SOURCES_KEY", [])
+    key = compiled._sources_key()
+    assert len(key) == 16 and key == compiled._sources_key()

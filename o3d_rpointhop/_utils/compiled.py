@@ -3,9 +3,13 @@
 ``import o3d_rpointhop`` does not import numba: :func:`kernel` returns a stand-in that
 imports numba, compiles the function (``cache=True``: the machine code is kept on disk,
 so later processes load it instead of compiling) and replaces itself on its first call.
-numba keeps its cache beside the module when that folder is writable and in the user's
-cache folder otherwise (``NUMBA_CACHE_DIR`` overrides both); with neither writable the
-kernel is compiled for the process alone, so a read-only install works too.
+Kernels call each other (helpers), across modules, and numba checks a cached kernel
+against its own source file only; so the cache lives in a folder named after the
+sources of every module that holds kernels (``<cache>/o3d-rpointhop/kernels-<hash>``,
+``<cache>`` being ``NUMBA_CACHE_DIR`` if set, else the user's cache folder): editing or
+upgrading any of them starts a fresh folder, and a kernel is never loaded with a stale
+helper inside. With no writable folder the kernel is compiled for the process alone,
+so a read-only install works too.
 
 Threads: kernels declared ``parallel=True`` run on :func:`threads` threads, which the
 caller sets from its ``n_jobs`` (``numba.set_num_threads`` applies to the calling
@@ -22,7 +26,7 @@ from typing import Any
 
 __all__ = ["kernel", "popcount", "prange", "threads"]
 
-_LOCK = threading.Lock()
+_LOCK = threading.RLock()
 
 #: ``numba.prange`` inside a kernel: a kernel module imports this name, and compiling
 #: binds it to numba's parallel range (``range`` until then: numba is not imported).
@@ -62,7 +66,12 @@ def _popcount_intrinsic(numba) -> Any:
 
 
 class _Kernel:
-    """A function compiled by ``numba.njit(**options)`` at its first call."""
+    """A function compiled by ``numba.njit(**options)`` at its first call.
+
+    A kernel may call other kernels of this module's kind (helpers, typically
+    ``inline="always"``): compiling it first compiles every kernel its code names and
+    binds the name to the compiled function, which numba can call.
+    """
 
     def __init__(self, function: Callable, options: dict) -> None:
         self.function = function
@@ -72,25 +81,76 @@ class _Kernel:
         self.__doc__ = function.__doc__
 
     def __call__(self, *args: Any) -> Any:
+        return self.dispatcher()(*args)
+
+    def dispatcher(self) -> Callable:
+        """The compiled function (compiled now if it was not yet)."""
         if self.compiled is None:
             with _LOCK:
-                if self.compiled is None:
-                    numba = _numba()
-                    names = self.function.__globals__
-                    if "prange" in names:
-                        names["prange"] = numba.prange
-                    if "popcount" in names:
-                        names["popcount"] = _popcount_intrinsic(numba)
-                    try:
-                        compiled = numba.njit(cache=True, **self.options)(self.function)
-                    except RuntimeError as exc:
-                        # No writable cache folder (a read-only install and no writable
-                        # home): compile for this process only.
-                        if "cannot cache" not in str(exc):
-                            raise
-                        compiled = numba.njit(**self.options)(self.function)
-                    self.compiled = compiled
-        return self.compiled(*args)
+                self._compile()
+        return self.compiled
+
+    def _compile(self) -> None:
+        """Compile under ``_LOCK`` (re-entrant: helpers compile inside their caller)."""
+        if self.compiled is not None:
+            return
+        numba = _numba()
+        names = self.function.__globals__
+        if "prange" in names:
+            names["prange"] = numba.prange
+        if "popcount" in names:
+            names["popcount"] = _popcount_intrinsic(numba)
+        for name in self.function.__code__.co_names:
+            helper = names.get(name)
+            if isinstance(helper, _Kernel):
+                helper._compile()
+                names[name] = helper.compiled
+        try:
+            with _cache_folder(numba):
+                compiled = numba.njit(cache=True, **self.options)(self.function)
+        except RuntimeError as exc:
+            # No writable cache folder (a read-only install and no writable home):
+            # compile for this process only.
+            if "cannot cache" not in str(exc):
+                raise
+            compiled = numba.njit(**self.options)(self.function)
+        self.compiled = compiled
+
+
+_SOURCES_KEY: list[str] = []
+
+
+def _sources_key() -> str:
+    """A hash of the source of every module of the package that holds kernels."""
+    if not _SOURCES_KEY:
+        import hashlib
+        from pathlib import Path
+
+        digest = hashlib.sha1()
+        root = Path(__file__).resolve().parents[1]
+        for path in sorted(root.rglob("*.py")):
+            text = path.read_bytes()
+            if b"@kernel(" in text:
+                digest.update(path.relative_to(root).as_posix().encode() + b"\0" + text)
+        _SOURCES_KEY.append(digest.hexdigest()[:16])
+    return _SOURCES_KEY[0]
+
+
+@contextmanager
+def _cache_folder(numba) -> Iterator[None]:
+    """numba's cache folder set to this version of the kernels' own while a kernel is
+    declared (numba reads it then); the user's setting is restored after."""
+    import os
+    from pathlib import Path
+
+    base = os.environ.get("NUMBA_CACHE_DIR") or os.environ.get("XDG_CACHE_HOME")
+    base = Path(base) if base else Path.home() / ".cache"
+    previous = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = str(base / "o3d-rpointhop" / f"kernels-{_sources_key()}")
+    try:
+        yield
+    finally:
+        numba.config.CACHE_DIR = previous
 
 
 def _numba():

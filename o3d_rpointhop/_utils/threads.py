@@ -1,5 +1,6 @@
-"""Thread limits: BLAS kept to one thread inside the descriptor's own block loop, and
-Open3D's registration code run on one thread so that seeded runs repeat bit for bit.
+"""Thread limits: how many threads the compiled kernels run on (every core unless told
+otherwise), BLAS kept to one thread inside the descriptor's own blocks, and Open3D's
+registration code run on one thread so that seeded runs repeat bit for bit.
 
 BLAS: the transform's matrix products are small (a block of 128 points against at most 128
 principal axes) and the loop runs on ``n_jobs`` threads of its own; a multi-threaded
@@ -13,16 +14,64 @@ against 245 ms at 4400 points, 66 against 61 ms at 1024), the price of honouring
 
 from __future__ import annotations
 
+import os
+import threading
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import AbstractContextManager, contextmanager
 
 import open3d as o3d
+from joblib import cpu_count, effective_n_jobs
+from joblib.parallel import get_active_backend
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["even_chunks", "map_threads", "one_blas_thread", "repeatable_open3d"]
+__all__ = [
+    "available_threads",
+    "kernel_threads",
+    "map_threads",
+    "run_blocks",
+    "one_blas_thread",
+    "repeatable_open3d",
+]
 
 _CONTROLLER: list[ThreadpoolController] = []
+_OPENMP: list[ThreadpoolController] = []
+
+
+def available_threads() -> int:
+    """The threads compiled kernels may use when nothing says otherwise: every core
+    this process may run on (``joblib.cpu_count``: affinity and container limits),
+    within OpenMP's limit as scikit-learn's OpenMP code reads it (``OMP_NUM_THREADS``,
+    which joblib's and Dask's workers set to their share, and
+    ``threadpoolctl.threadpool_limits(..., user_api="openmp")``)."""
+    limits = [cpu_count(), *_openmp_limits()]
+    env = os.environ.get("OMP_NUM_THREADS", "")
+    if env.strip().isdigit() and int(env) > 0:
+        limits.append(int(env))
+    return max(1, min(limits))
+
+
+def _openmp_limits() -> list[int]:
+    """The current thread limit of every OpenMP library loaded (scikit-learn's)."""
+    if not _OPENMP:
+        _OPENMP.append(ThreadpoolController())
+    return [lib.num_threads for lib in _OPENMP[0].select(user_api="openmp").lib_controllers]
+
+
+def kernel_threads(n_jobs: int | None) -> int:
+    """Threads for one cloud's compiled kernels, from an estimator's ``n_jobs``.
+
+    ``None`` means :func:`available_threads` (every core, as Open3D's and scikit-learn's
+    compiled code use), unless ``joblib.parallel_config(n_jobs=...)`` sets a number, or
+    one thread inside a joblib worker (the workers are the parallelism); an int is
+    joblib's (``-1`` every core), at most the available threads. The results do not
+    depend on it: every kernel splits its work into pieces of a fixed size.
+    """
+    if n_jobs is None:
+        backend, n_jobs = get_active_backend()
+        if n_jobs is None:
+            return 1 if getattr(backend, "nesting_level", 0) > 0 else available_threads()
+    return max(1, min(effective_n_jobs(n_jobs), available_threads()))
 
 
 def one_blas_thread() -> AbstractContextManager:
@@ -51,29 +100,61 @@ def repeatable_open3d() -> Iterator[None]:
 
 
 def map_threads(func: Callable, items: Sequence, n_threads: int) -> None:
-    """``func(*item)`` for every item, on ``n_threads`` threads started for this call only
-    (in the calling thread when ``n_threads <= 1``). Each call writes its own part of
-    some output, so the order in which calls finish does not matter; an exception
-    raised by a call is raised here (the first failing item's, in item order), after
-    the other calls have ended. The work is numpy, scipy and Open3D calls that release
-    the GIL."""
-    if n_threads <= 1 or len(items) <= 1:
+    """``func(*item)`` for every item, on up to ``n_threads`` threads: the calling thread
+    and a pool kept for the process (the calling thread alone when ``n_threads <= 1``,
+    and inside the pool's own threads). Each call writes its own part of some output,
+    so the order in which calls finish does not matter; an exception raised by a call
+    is raised here (the first failing item's, in item order), after the other calls
+    have ended. The work
+    is compiled kernels, numpy and Open3D calls that release the GIL. A process forked
+    from this one starts a pool of its own (threads do not survive a fork)."""
+    inside = threading.current_thread().name.startswith(_PREFIX)
+    if n_threads <= 1 or len(items) <= 1 or inside:
         for item in items:
             func(*item)
         return
-    workers = min(n_threads, len(items))
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rpointhop") as pool:
-        for future in [pool.submit(func, *item) for item in items]:
-            future.result()
+    pool = _executor(min(n_threads, len(items)) - 1)  # the calling thread is one
+    futures = [pool.submit(func, *item) for item in items[1:]]
+    try:
+        func(*items[0])
+    finally:
+        wait(futures)
+    for future in futures:
+        future.result()
 
 
-def even_chunks(n: int, largest: int, n_threads: int, smallest: int = 1) -> list[tuple[int, int]]:
-    """``(start, stop)`` bounds of ``range(n)`` in equal chunks for ``n_threads``
-    threads: ``n_threads`` times as many chunks as chunks of at most ``largest`` need
-    (so the threads finish together and the chunks in flight at once hold about
-    ``largest`` items in all), but none under ``smallest`` items unless ``n`` is."""
-    n_threads = max(1, n_threads)
-    count = n_threads * max(1, -(-n // largest))
-    count = max(1, min(count, n // max(1, smallest)))
-    size = max(1, -(-n // count))
-    return [(start, min(n, start + size)) for start in range(0, n, size)]
+def run_blocks(func: Callable, n: int, n_threads: int, *args, align: int = 1) -> None:
+    """``func(start, stop, *args)`` over ``range(n)`` cut into one contiguous piece per
+    thread, every piece starting at a multiple of ``align`` (for kernels whose work
+    restarts there, so that any cut gives the same result)."""
+    if n <= 0:
+        return
+    align = max(1, align)
+    pieces = max(1, min(n_threads, _ceil_div(n, align)))
+    size = _ceil_div(_ceil_div(n, pieces), align) * align
+    bounds = [(start, min(n, start + size), *args) for start in range(0, n, size)]
+    map_threads(func, bounds, n_threads)
+
+
+def _ceil_div(a: int, b: int) -> int:
+    return -(-a // b)
+
+
+_PREFIX = "o3d-rpointhop"
+_POOL: dict = {}
+
+
+def _executor(workers: int) -> ThreadPoolExecutor:
+    """The process's pool, grown to at least ``workers`` threads."""
+    with _POOL_LOCK:
+        pool = _POOL.get("executor")
+        if pool is None or _POOL["workers"] < workers:
+            if pool is not None:
+                pool.shutdown(wait=False)
+            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=_PREFIX)
+            _POOL.update(executor=pool, workers=workers)
+        return pool
+
+
+_POOL_LOCK = threading.Lock()
+os.register_at_fork(after_in_child=_POOL.clear)

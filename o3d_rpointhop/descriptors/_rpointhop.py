@@ -9,12 +9,12 @@ from os import PathLike
 from typing import Any
 
 import numpy as np
-from joblib import effective_n_jobs
 from sklearn.base import _fit_context
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from .._utils.params import Interval, StrOptions
+from .._utils.threads import kernel_threads
 from .._utils.validation import as_cloud_list, as_viewpoints
 from ._base import BaseDescriptor
 from ._persistence import load_model, save_model
@@ -100,10 +100,13 @@ class RPointHopTransformer(BaseDescriptor):
         Show a progress bar on stderr (``tqdm``) for long fits and transforms. ``None``:
         only when stderr is a terminal and the job is large.
     n_jobs : int, default=None
-        Parallel workers: processes over clouds (``fit``, and ``transform`` of several
-        clouds), threads over blocks of points when transforming one cloud. ``None``
-        means 1 and ``-1`` all cores. Honoured by joblib's ``parallel_config``, so a
-        Dask cluster can run it.
+        Parallel workers. Processes over clouds (``fit``, and ``transform`` of several
+        clouds): ``None`` means 1 and ``-1`` all cores, as in scikit-learn. Threads of
+        the compiled passes over one cloud's points: ``None`` means every core, as
+        Open3D's and scikit-learn's compiled code use (within ``OMP_NUM_THREADS``,
+        ``threadpoolctl`` limits and, inside a joblib worker, one thread), an int at
+        most that many. Honoured by joblib's ``parallel_config``, so a Dask cluster can
+        run it. The descriptors are the same bytes on any number of threads.
     random_state : int, RandomState instance or None, default=None
         Seeds ``fit_subsample``. Everything else is deterministic: sampling depends on
         the geometry only, so it moves with the cloud.
@@ -343,7 +346,7 @@ class RPointHopTransformer(BaseDescriptor):
             points,
             config,
             n_components=self.n_components,
-            n_threads=max(1, effective_n_jobs(self.n_jobs)),
+            n_threads=kernel_threads(self.n_jobs),
             progress=self.progress,
             viewpoint=viewpoint,
         )

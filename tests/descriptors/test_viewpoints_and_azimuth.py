@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 from o3d_rpointhop import FPFHTransformer, RPointHopTransformer
 from o3d_rpointhop.datasets import make_blob, make_object, make_room
 from o3d_rpointhop.descriptors.pointhop._frames import local_reference_frames
-from o3d_rpointhop.descriptors.pointhop._geometry import _about_the_normal
-from o3d_rpointhop.descriptors.pointhop._octants import azimuth_bins, cylindrical, octant_index
+from o3d_rpointhop.descriptors.pointhop._geometry import _normal_means
+from o3d_rpointhop.descriptors.pointhop._octants import bin_index, cylindrical_of
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +33,7 @@ def _scan(n=900, seed=3):
 def test_the_normal_axis_faces_the_sensor_and_the_moment_rule_decides_without_one():
     rng = np.random.default_rng(3)
     patch = np.c_[rng.uniform(-1, 1, (60, 2)), 0.01 * rng.exponential(size=60)]
-    offsets = (patch - patch[0]).T[:, None, :]
+    offsets = (patch[1:] - patch[0]).T[:, None, :]
     towards = np.array([[0.0], [0.0], [-5.0]])  # the centroid below: the fallback's way
     free, _ = local_reference_frames(offsets, 60, towards)
     for side in (1.0, -1.0):
@@ -128,21 +128,55 @@ def _turned_about_z(local: np.ndarray, angles: np.ndarray) -> np.ndarray:
     return np.stack([c * local[0] - s * local[1], s * local[0] + c * local[1], local[2]])
 
 
+def _cylindrical(local: np.ndarray) -> np.ndarray:
+    out = np.empty_like(local)
+    for i in range(local.shape[1]):
+        block = np.ascontiguousarray(local[:, i])
+        cylindrical_of(block, block.shape[1], out[:, i])
+    return out
+
+
 def test_azimuth_bins_and_coordinates_ignore_any_turn_about_the_normal():
     rng = np.random.default_rng(0)
     local = rng.normal(size=(3, 50, 40))
     angles = rng.uniform(0, 2 * np.pi, 50)
     turned = _turned_about_z(local, angles)
-    np.testing.assert_array_equal(azimuth_bins(turned), azimuth_bins(local))
-    np.testing.assert_allclose(cylindrical(turned), cylindrical(local), atol=1e-12)
-    assert not np.array_equal(octant_index(turned), octant_index(local))  # octants do not
-    bins = azimuth_bins(local)
+    np.testing.assert_array_equal(bin_index(turned, "azimuth"), bin_index(local, "azimuth"))
+    np.testing.assert_allclose(_cylindrical(turned), _cylindrical(local), atol=1e-12)
+    assert not np.array_equal(bin_index(turned, "octants"), bin_index(local, "octants"))
+    bins = bin_index(local, "azimuth")
     assert bins.min() >= 0 and bins.max() <= 7
     # Four shells of equal area: about a quarter of points spread evenly over a disc.
     disc = np.sqrt(rng.uniform(size=(1, 4000))) * np.exp(2j * np.pi * rng.uniform(size=(1, 4000)))
     flat = np.stack([disc.real, disc.imag, np.zeros_like(disc.real)])
-    shares = np.bincount(azimuth_bins(flat).ravel() % 4, minlength=4) / 4000
+    shares = np.bincount(bin_index(flat, "azimuth").ravel() % 4, minlength=4) / 4000
     np.testing.assert_allclose(shares, 0.25, atol=0.03)
+
+
+def _normals(points, queries, nb, frames, azimuth):
+    bins = np.zeros(nb.shape, np.uint8)
+    bins[:, ::2] = 5  # two bins: octant 0 the odd neighbours, 5 the even
+    out = np.empty((len(queries), 24))
+    _normal_means(0, len(queries), points, queries, nb, bins, frames, azimuth, out)
+    return out.reshape(len(queries), 8, 3)[:, [0, 5]]  # (q, 2 bins, 3 components)
+
+
+def test_neighbour_normals_in_the_query_frame_by_hand():
+    """Octant means of the neighbours' normals (their frames' third axes) in the
+    query's frame; about the normal, as radial, tangential and normal components."""
+    points = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.5], [0.0, 3.0, 0.0]])
+    frames = np.tile(np.eye(3), (3, 1, 1))
+    frames[1] = Rotation.from_rotvec([0.0, np.pi / 2, 0.0]).as_matrix()  # normal along +x
+    frames[2] = Rotation.from_rotvec([np.pi / 2, 0.0, 0.0]).as_matrix()  # normal along -y
+    nb = np.array([[2, 1]], dtype=np.int32)  # even: point 2, odd: point 1
+    plain = _normals(points, np.array([0]), nb, frames, False)
+    np.testing.assert_allclose(plain[0, 1], frames[2][:, 2], atol=1e-12)  # bin 5: point 2
+    np.testing.assert_allclose(plain[0, 0], frames[1][:, 2], atol=1e-12)
+    about = _normals(points, np.array([0]), nb, frames, True)
+    # Point 2 lies along +y from the query's axis: its normal (0, -1, 0) is radial -1.
+    np.testing.assert_allclose(about[0, 1], [-1.0, 0.0, 0.0], atol=1e-12)
+    # Point 1 lies along +x: its normal (1, 0, 0) is radial +1.
+    np.testing.assert_allclose(about[0, 0], [1.0, 0.0, 0.0], atol=1e-12)
 
 
 def test_neighbour_normals_about_the_normal_ignore_a_turn_of_the_frame():
@@ -150,16 +184,16 @@ def test_neighbour_normals_about_the_normal_ignore_a_turn_of_the_frame():
     points = rng.normal(size=(30, 3))
     frames = Rotation.random(30, random_state=2).as_matrix()
     queries = np.arange(5)
-    nb = rng.integers(5, 30, size=(5, 8))
-    normals = np.einsum("qkd,qdj->jqk", frames[nb, :, 2], frames[queries])
-    base = _about_the_normal(normals, points, queries, nb, frames)
+    nb = rng.integers(5, 30, size=(5, 8)).astype(np.int32)
+    base = _normals(points, queries, nb, frames, True)
     spun = frames.copy()
     turn = Rotation.from_rotvec(np.c_[np.zeros((5, 2)), rng.uniform(0, 6, 5)]).as_matrix()
     spun[queries] = frames[queries] @ turn  # each query's frame turned about its own axis 2
-    turned_normals = np.einsum("qkd,qdj->jqk", frames[nb, :, 2], spun[queries])
-    again = _about_the_normal(turned_normals, points, queries, nb, spun)
-    np.testing.assert_allclose(again, base, atol=1e-12)
-    np.testing.assert_allclose((base**2).sum(axis=0), 1.0, atol=1e-12)  # still unit vectors
+    spun[5:] = frames[5:]
+    np.testing.assert_allclose(_normals(points, queries, nb, spun, True), base, atol=1e-12)
+    assert not np.allclose(
+        _normals(points, queries, nb, spun, False), _normals(points, queries, nb, frames, False)
+    )
 
 
 def test_azimuth_model_is_rigid_invariant_saved_and_reloaded(azimuth_model, tmp_path):

@@ -4,7 +4,8 @@ per-cloud hop geometry and the fitted hop tree (fit / forward / describe).
 
 Modules: :mod:`._neighbors` (k-nearest-neighbour search), :mod:`._sampling`,
 :mod:`._frames`, :mod:`._octants`, :mod:`._attributes`, :mod:`._saab`, :mod:`._config`
-(the hop parameters), :mod:`._geometry` (a cloud's hop structure) and :mod:`._tree`.
+(the hop parameters), :mod:`._geometry` (a cloud's hop structure, in compiled passes),
+:mod:`._pooling` (the compiled hops from hop 2 on) and :mod:`._tree`.
 """
 
 from ._config import SAMPLING_METHODS, HopConfig

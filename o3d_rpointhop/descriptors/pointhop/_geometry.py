@@ -1,18 +1,15 @@
-"""Per-cloud geometry of the R-PointHop hops.
+"""Per-cloud geometry of the R-PointHop hops, in compiled passes.
 
-The geometry of a cloud (its local reference frames, hop samples,
-neighbourhoods and octant memberships) does not depend on the learned kernels. It is
-computed once per cloud by :func:`build_geometry` and reduced to
+The geometry of a cloud (its local reference frames, hop samples, neighbourhoods and
+their bins) does not depend on the learned kernels. :func:`build_geometry` computes it
+once per cloud and keeps
 
 * the hop-1 attributes: octant means of the neighbours' coordinates (24-D), and with
   the scene variant's ``attributes`` also of their normals and eigenvalue features
   (:mod:`._attributes`), and
-* for every later hop, an :class:`~._octants.OctantPooling` operator that
-  maps the previous hop's per-point features to the octant means of each query's
-  neighbourhood.
-
-The forward pass through fitted hops (:mod:`._tree`) is then a handful of matrix
-products, used both when fitting (hop by hop over all clouds) and when transforming.
+* for every later hop, its :class:`HopNeighbourhood`: each query's neighbours among
+  the previous hop's points and their bins, what the hop's pooling reads
+  (:mod:`._pooling`).
 
 Hop ``h`` (1-based) takes its queries from the sample ``S_h`` and its neighbours from
 ``S_{h-1}``, where ``S_0`` is the whole cloud and ``S_h`` is a sample of size
@@ -20,6 +17,14 @@ Hop ``h`` (1-based) takes its queries from the sample ``S_h`` and its neighbours
 :data:`~._sampling.FPS_MAX_POINTS` points, Poisson disks above; see
 :mod:`._sampling`). When transforming, the last hop takes every input point as
 a query, so every point gets a descriptor.
+
+The passes: one k-d tree over the cloud and one search serve the frames and every hop
+whose neighbours come from the whole cloud (the first ``s`` neighbours of each point
+are its ``s`` nearest, for every size ``s`` asked for); a compiled pass over each point
+orients its frame, bins its neighbours and pools hop 1; every hop whose neighbours
+come from a sample searches a tree over that sample and bins its neighbours in the
+queries' frames in one compiled pass. Each query's work is its own, so nothing depends
+on the number of threads.
 """
 
 from __future__ import annotations
@@ -29,21 +34,46 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._utils.compiled import kernel
-from ..._utils.threads import even_chunks, map_threads
-from ._attributes import ATTRIBUTE_CHANNELS, eigen_features
+from ..._utils.kdtree import QUERY_CHUNK
+from ..._utils.threads import run_blocks
+from ._attributes import eigen_features
 from ._config import HopConfig
-from ._frames import local_reference_frames, project
-from ._neighbors import NeighborIndex, drop_self
-from ._octants import N_OCTANTS, OctantPooling, bin_index, cylindrical, octant_means
-from ._sampling import hop_subsets
+from ._frames import frame_of
+from ._neighbors import HopSearch
+from ._octants import N_OCTANTS, bins_of, cylindrical_of, means_of
+from ._sampling import hop_subsets, resolve_method
 
-__all__ = ["CloudGeometry", "build_geometry", "cloud_frames", "cloud_scale"]
+__all__ = ["CloudGeometry", "HopNeighbourhood", "build_geometry", "cloud_frames", "cloud_scale"]
 
-#: Points whose neighbourhoods (about 3 kB each in float64) are in memory at once.
-GEOMETRY_CHUNK = 16384
-#: Fewest points per chunk when chunks are shared between threads (below about 8k
-#: points, threads cost as much as they save: measured at 2k-8k points, two threads).
-THREAD_CHUNK = 4096
+#: Points whose whole-cloud neighbourhoods are in memory at once (about 0.4 kB each):
+#: a bounded chunking, so that memory grows linearly with the cloud.
+GEOMETRY_CHUNK = 65536
+
+
+@dataclass
+class HopNeighbourhood:
+    """Who each query of a hop pools, and into which bin.
+
+    Attributes
+    ----------
+    neighbours : ndarray of shape (n_queries, k), int32
+        Positions among the ``n_sources`` points of the previous hop.
+    bins : ndarray of shape (n_queries, k), uint8
+        The bin (0..7) of each neighbour in the query's frame.
+    n_sources : int
+    """
+
+    neighbours: np.ndarray
+    bins: np.ndarray
+    n_sources: int
+
+    @property
+    def n_queries(self) -> int:
+        return len(self.neighbours)
+
+    @property
+    def nbytes(self) -> int:
+        return self.neighbours.nbytes + self.bins.nbytes
 
 
 @dataclass
@@ -54,18 +84,17 @@ class CloudGeometry:
     ----------
     n_points : int
     hop1_attributes : ndarray of shape (|S_1|, config.hop1_dim)
-    poolings : list of OctantPooling
-        ``poolings[h - 2]`` maps hop ``h - 1`` features (one column per point of
-        ``S_{h-1}``) to the octant means entering hop ``h``.
+    hops : list of HopNeighbourhood
+        ``hops[h - 2]`` serves hop ``h`` (1-based), from hop 2 on.
     """
 
     n_points: int
     hop1_attributes: np.ndarray | None
-    poolings: list[OctantPooling | None]
+    hops: list[HopNeighbourhood | None]
 
     @property
     def nbytes(self) -> int:
-        parts = [self.hop1_attributes, *self.poolings]
+        parts = [self.hop1_attributes, *self.hops]
         return sum(p.nbytes for p in parts if p is not None)
 
     def release(self, hop: int) -> None:
@@ -73,7 +102,7 @@ class CloudGeometry:
         if hop == 0:
             self.hop1_attributes = None
         else:
-            self.poolings[hop - 1] = None
+            self.hops[hop - 1] = None
 
 
 def cloud_scale(mean_dist: np.ndarray, scale: str | float) -> float:
@@ -95,17 +124,221 @@ def cloud_scale(mean_dist: np.ndarray, scale: str | float) -> float:
     return value
 
 
-def _chunks(n: int, n_threads: int) -> list[tuple[int, int]]:
-    """Bounds of the chunks of ``n`` queries worked on at once: at most
-    :data:`GEOMETRY_CHUNK` in flight in all, shared by ``n_threads`` threads when each
-    gets at least :data:`THREAD_CHUNK`."""
-    return even_chunks(n, GEOMETRY_CHUNK, n_threads, THREAD_CHUNK)
+@kernel(nogil=True)
+def _frames_pass(
+    start,
+    stop,
+    points,
+    first,
+    neighbours,
+    k_lrf,
+    centroid,
+    viewpoint,
+    has_view,
+    hop1_rows,
+    k1,
+    azimuth,
+    frames,
+    eigenvalues,
+    bins,
+    hop1,
+):  # pragma: no cover - compiled
+    """Rows ``first + start : first + stop`` of the cloud (``neighbours`` and ``bins``
+    hold one row per point from ``first`` on): each point's frame (``frames``,
+    ``eigenvalues``: the cloud's arrays), its neighbours' bins in it and, for the
+    points with a hop-1 row (``hop1_rows[row] >= 0``), the octant means of the first
+    ``k1`` neighbours' coordinates (cylindrical ones with ``azimuth``) into that row of
+    ``hop1``."""
+    m = neighbours.shape[1]
+    offsets = np.empty((3, m))
+    local = np.empty((3, m))
+    values = np.empty((3, m))
+    cov = np.empty((3, 3))
+    work = np.empty(k_lrf)
+    towards = np.empty(3)
+    sensor = np.empty(3)
+    counts = np.empty(N_OCTANTS, np.int64)
+    for i in range(start, stop):
+        row = first + i
+        for d in range(3):
+            towards[d] = centroid[d] - points[row, d]
+            sensor[d] = viewpoint[d] - points[row, d]
+            for j in range(m):
+                offsets[d, j] = points[neighbours[i, j], d] - points[row, d]
+        frame_of(
+            offsets,
+            m,
+            k_lrf,
+            towards,
+            sensor,
+            has_view,
+            frames[row],
+            eigenvalues[row],
+            local,
+            cov,
+            work,
+        )
+        bins_of(local, m, azimuth, bins[i])
+        target = hop1_rows[row]
+        if target >= 0:
+            if azimuth:
+                cylindrical_of(local, k1, values)
+                means_of(values, k1, bins[i], counts, hop1[target], 0)
+            else:
+                means_of(local, k1, bins[i], counts, hop1[target], 0)
 
 
-def _rows_in(sorted_ids: np.ndarray, start: int, stop: int) -> tuple[int, int]:
-    """Positions ``lo:hi`` of the ids in ``[start, stop)`` in a sorted id array."""
-    lo, hi = np.searchsorted(sorted_ids, (start, stop))
-    return int(lo), int(hi)
+@kernel(nogil=True)
+def _sampled_bins(
+    start, stop, points, queries, sources, neighbours, frames, azimuth, out
+):  # pragma: no cover - compiled
+    """Bins of queries ``start:stop``'s neighbours (positions among ``sources``, rows of
+    the cloud) in the query's frame (``queries``: rows of the cloud) into ``out``."""
+    k = neighbours.shape[1]
+    local = np.empty((3, k))
+    for i in range(start, stop):
+        row = queries[i]
+        f = frames[row]
+        for j in range(k):
+            s = sources[neighbours[i, j]]
+            x = points[s, 0] - points[row, 0]
+            y = points[s, 1] - points[row, 1]
+            z = points[s, 2] - points[row, 2]
+            for a in range(3):
+                local[a, j] = x * f[0, a] + y * f[1, a] + z * f[2, a]
+        bins_of(local, k, azimuth, out[i])
+
+
+@kernel(nogil=True)
+def _normal_means(
+    start, stop, points, queries, neighbours, bins, frames, azimuth, out
+):  # pragma: no cover - compiled
+    """Octant means of the neighbours' normals (their frames' third axes) in each
+    query's frame into ``out`` ``(q, 24)``. With ``azimuth``, a normal is given by its
+    components along the direction from the query's axis to the neighbour (radial),
+    across it (tangential) and along the query's normal: nothing depends on the
+    query's in-plane axes (a neighbour on the axis has no radial direction: both are 0
+    there)."""
+    k = neighbours.shape[1]
+    values = np.empty((3, k))
+    counts = np.empty(N_OCTANTS, np.int64)
+    for i in range(start, stop):
+        row = queries[i]
+        f = frames[row]
+        for j in range(k):
+            nb = neighbours[i, j]
+            n0 = frames[nb, 0, 2]
+            n1 = frames[nb, 1, 2]
+            n2 = frames[nb, 2, 2]
+            for a in range(3):
+                values[a, j] = (n0 * f[0, a] + n1 * f[1, a]) + n2 * f[2, a]
+            if azimuth:
+                ex = points[nb, 0] - points[row, 0]
+                ey = points[nb, 1] - points[row, 1]
+                ez = points[nb, 2] - points[row, 2]
+                x = ex * f[0, 0] + ey * f[1, 0] + ez * f[2, 0]
+                y = ex * f[0, 1] + ey * f[1, 1] + ez * f[2, 1]
+                rho = np.sqrt(x * x + y * y)
+                inv = 1.0 / rho if rho > 0.0 else 0.0
+                a0 = values[0, j]
+                a1 = values[1, j]
+                values[0, j] = (a0 * x + a1 * y) * inv
+                values[1, j] = (a1 * x - a0 * y) * inv
+        means_of(values, k, bins[i], counts, out[i], 0)
+
+
+@kernel(nogil=True)
+def _feature_means(start, stop, neighbours, bins, features, out):  # pragma: no cover
+    """Octant means of per-point features ``(n, c)`` over each query's neighbours into
+    ``out`` ``(q, 8 * c)``."""
+    k = neighbours.shape[1]
+    c = features.shape[1]
+    values = np.empty((c, k))
+    counts = np.empty(N_OCTANTS, np.int64)
+    for i in range(start, stop):
+        for j in range(k):
+            for d in range(c):
+                values[d, j] = features[neighbours[i, j], d]
+        means_of(values, k, bins[i], counts, out[i], 0)
+
+
+def _rows(sample: np.ndarray | None, n: int) -> np.ndarray:
+    """Each cloud row's position in a sample of rows (-1 for rows outside it)."""
+    position = np.full(n, -1, dtype=np.int64)
+    position[slice(None) if sample is None else sample] = np.arange(
+        n if sample is None else len(sample)
+    )
+    return position
+
+
+def _whole(sample: np.ndarray, n: int) -> np.ndarray | None:
+    """None for a sample of every row (the whole cloud), else the sample."""
+    return None if len(sample) == n else sample
+
+
+def _frames_and_full_hops(
+    points, config, search, k_search, full, queries, viewpoint, n_threads, found=None
+):
+    """The frames pass over every point in chunks: frames, eigenvalues, the scale's
+    mean distances, hop 1's coordinate means, and for every hop ``h`` in ``full``
+    (neighbours from the whole cloud) its queries' neighbours and bins. ``found``:
+    the whole cloud's search, ``(neighbours, mean_dist)``, if made already."""
+    n = len(points)
+    k_lrf = config.lrf_neighbors
+    azimuth = config.pooling == "azimuth"
+    frames = np.empty((n, 3, 3))
+    eigenvalues = np.empty((n, 3))
+    mean_dist = np.empty(n) if found is None else found[1]
+    hop1_rows = _rows(queries[0], n)
+    hop1 = np.empty((n if queries[0] is None else len(queries[0]), 24))
+    # Hop 1 is pooled in the pass; its neighbours are kept only for the scene attributes.
+    kept = {h: _rows(queries[h], n) for h in full if h > 0 or len(config.attributes) > 1}
+    stored = {
+        h: (
+            np.empty((int((kept[h] >= 0).sum()), config.n_neighbors[h]), np.int32),
+            np.empty((int((kept[h] >= 0).sum()), config.n_neighbors[h]), np.uint8),
+        )
+        for h in kept
+    }
+    levels = tuple(config.n_neighbors[h] for h in full)
+    centroid = points.mean(axis=0)
+    view = centroid if viewpoint is None else np.asarray(viewpoint, dtype=np.float64)
+    step = -(-GEOMETRY_CHUNK // QUERY_CHUNK) * QUERY_CHUNK  # where the searches restart
+    for start in range(0, n, step):
+        rows = np.arange(start, min(n, start + step))
+        if found is None:
+            neighbours, _, mean_dist[rows] = search.neighbours(
+                rows, k_search, levels, n_mean=k_lrf - 1, n_threads=n_threads
+            )
+        else:
+            neighbours = found[0][start : start + len(rows)]
+        bins = np.empty(neighbours.shape, np.uint8)
+        run_blocks(
+            _frames_pass,
+            len(rows),
+            n_threads,
+            points,
+            start,
+            neighbours,
+            k_lrf,
+            centroid,
+            view,
+            viewpoint is not None,
+            hop1_rows,
+            config.n_neighbors[0],
+            azimuth,
+            frames,
+            eigenvalues,
+            bins,
+            hop1,
+        )
+        for h in kept:
+            k = config.n_neighbors[h]
+            position = kept[h][rows]
+            chosen = position >= 0
+            stored[h][0][position[chosen]] = neighbours[chosen, :k]
+            stored[h][1][position[chosen]] = bins[chosen, :k]
+    return frames, eigenvalues, mean_dist, hop1, stored
 
 
 def build_geometry(
@@ -118,132 +351,90 @@ def build_geometry(
     """Compute the hop structure of one validated cloud, large enough for ``config``
     (``config.shortfall(len(points))`` is None: the estimator checks it).
 
-    Neighbourhoods are searched and expressed in their frames in chunks, at most
-    :data:`GEOMETRY_CHUNK` queries in flight at once over all threads; a hop's octants
-    and neighbour rows (5 bytes per neighbour) are kept only until its pooling operator
-    (4 bytes per neighbour) is built, and hop 1's only when the scene attributes need
-    them, so memory grows linearly with the cloud.
-
     Parameters
     ----------
     points : ndarray of shape (n, 3), float64
+        Best in a spatial order (:func:`~._neighbors.spatial_order`): each search
+        starts from the previous query's radius.
     config : HopConfig
     for_fit : bool
         If True the last hop's queries are its sample (as in training); otherwise they
         are all ``n`` points (one descriptor per input point).
     n_threads : int, default=1
-        Threads sharing the chunks (started for this call only). Every query's
-        neighbourhood is worked on by itself, so the result does not depend on the
-        chunks or the threads.
+        Threads of the compiled passes. Every query's neighbourhood is worked on by
+        itself, so the result does not depend on them.
     viewpoint : ndarray of shape (3,), default=None
         Where the sensor that saw the cloud stands, in the cloud's coordinates: every
         frame's normal axis then points towards it (see
         :func:`~._frames.local_reference_frames`).
     """
+    points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
     if not np.any(points != points[0]):
         raise ValueError("the cloud has no spatial extent: all its points coincide")
     n_hops = config.n_hops
     sizes = config.sample_sizes(n)
-    samples = hop_subsets(points, sizes if for_fit else sizes[:-1], config.sampling)
-    everything = np.arange(n, dtype=np.int64)
-    sources = [everything] + samples[: n_hops - 1]
-    queries = samples if for_fit else samples + [everything]
-    # Hops whose neighbours come from the whole cloud share the LRF's search.
-    full = [h for h in range(n_hops) if len(sources[h]) == n]
-    k_lrf = config.lrf_neighbors
-    k_all = max([k_lrf] + [config.n_neighbors[h] + 1 for h in full])
-    # Hop 1's neighbours are pooled into its attributes right away; the scene
-    # attributes need them again once every frame is known.
-    scene = len(config.attributes) > 1  # the scene attributes: compiled kernels
-    keep = [h for h in full if h > 0 or scene]
-    octants = [None] * n_hops
-    neighbours = [None] * n_hops
-    for h in keep:
-        octants[h] = np.empty((len(queries[h]), config.n_neighbors[h]), np.uint8)
-        neighbours[h] = np.empty(octants[h].shape, np.int32)
-    hop1_sums = np.empty((len(queries[0]), 24))
-    frames = np.empty((n, 3, 3))
-    eigenvalues = np.empty((n, 3)) if "eigen" in config.attributes else None
-    mean_dist = np.empty(n)
-    planes = np.ascontiguousarray(points.T)  # (3, n)
-    centroid = points.mean(axis=0)[:, None]
-    index = NeighborIndex(points)
-
-    def full_chunk(start: int, stop: int, index: NeighborIndex = index) -> None:
-        nn_idx, nn_sq = index.query(points[start:stop], k_all)  # column 0: the point itself
-        # Every hop expresses its neighbours in these frames. (The paper re-decides the
-        # axis signs on each hop's neighbourhood; keeping the LRF's own signs, as the
-        # authors' code does, is cheaper and matched slightly better on resampled
-        # ModelNet40 pairs.)
-        found = _chunk_frames(
-            planes, start, stop, nn_idx, k_lrf, centroid, viewpoint, eigenvalues is not None
+    # Hops whose neighbours come from the whole cloud share the frames' search.
+    full = [0] + [h for h in range(1, n_hops) if sizes[h - 1] == n]
+    k_search = max([config.lrf_neighbors - 1] + [config.n_neighbors[h] for h in full])
+    levels = tuple(config.n_neighbors[h] for h in full)
+    search = HopSearch(points)
+    method = resolve_method(config.sampling, n)
+    found = graph = None
+    if method == "fps":  # the search first: FPS runs on its neighbour lists
+        neighbours, reach, mean_dist = search.neighbours(
+            None, k_search, levels, n_mean=config.lrf_neighbors - 1, n_threads=n_threads
         )
-        frames[start:stop], local = found[0], found[1]
-        if eigenvalues is not None:
-            eigenvalues[start:stop] = found[2]
-        mean_dist[start:stop] = np.sqrt(nn_sq[:, 1:k_lrf]).mean(axis=1)
-        for h in full:
-            k = config.n_neighbors[h]
-            lo, hi = _rows_in(queries[h], start, stop)
-            rows = queries[h][lo:hi] - start
-            # Every query belongs to the searched cloud, so its first hit is itself.
-            block = local[:, rows, 1 : k + 1]
-            octant = bin_index(block, config.pooling)
-            if h in keep:
-                octants[h][lo:hi] = octant
-                neighbours[h][lo:hi] = nn_idx[rows, 1 : k + 1]
-            if h == 0:
-                values = cylindrical(block) if config.pooling == "azimuth" else block
-                hop1_sums[lo:hi] = octant_means(values, octant, compiled=scene)
-
-    map_threads(full_chunk, _chunks(n, n_threads), n_threads)
-    del index, full_chunk  # the whole cloud's k-d tree
-    poolings: list[OctantPooling | None] = [None] * (n_hops - 1)
+        found, graph = (neighbours, mean_dist), (neighbours, reach)
+    drawn = hop_subsets(points, sizes if for_fit else sizes[:-1], method, graph)
+    samples = [_whole(s, n) for s in drawn]
+    sources = [None] + samples[: n_hops - 1]
+    queries = samples if for_fit else samples + [None]
+    frames, eigenvalues, mean_dist, hop1, stored = _frames_and_full_hops(
+        points, config, search, k_search, full, queries, viewpoint, n_threads, found
+    )
+    del search  # the whole cloud's tree
+    hop1 /= cloud_scale(mean_dist, config.scale)
+    hops: list[HopNeighbourhood | None] = [None] * (n_hops - 1)
+    azimuth = config.pooling == "azimuth"
     for h in range(1, n_hops):
         k, src, qry = config.n_neighbors[h], sources[h], queries[h]
-        if h not in full:
-            octants[h] = np.empty((len(qry), k), np.uint8)
-            neighbours[h] = np.empty(octants[h].shape, np.int32)
-            src_index = NeighborIndex(points[src])
-
-            def sampled_chunk(lo, hi, h=h, k=k, src=src, qry=qry, src_index=src_index):
-                idx, sq = src_index.query(points[qry[lo:hi]], k + 1)
-                nb = drop_self(idx, sq, k)
-                offsets = np.take(planes, src[nb], axis=1) - planes[:, qry[lo:hi], None]
-                local = project(offsets, frames[qry[lo:hi]])
-                octants[h][lo:hi] = bin_index(local, config.pooling)
-                neighbours[h][lo:hi] = nb
-
-            map_threads(sampled_chunk, _chunks(len(qry), n_threads), n_threads)
-            del src_index, sampled_chunk
-        poolings[h - 1] = OctantPooling(octants[h], neighbours[h], len(src))
-        octants[h] = neighbours[h] = None
-    hop1_sums /= cloud_scale(mean_dist, config.scale)
-    hop1 = hop1_sums
+        n_sources = n if src is None else len(src)
+        if h in full:
+            neighbours, bins = stored.pop(h)
+        else:
+            neighbours = HopSearch(points, src).neighbours(qry, k, n_threads=n_threads)[0]
+            rows = np.arange(n) if qry is None else qry
+            bins = np.empty(neighbours.shape, np.uint8)
+            run_blocks(
+                _sampled_bins,
+                len(rows),
+                n_threads,
+                points,
+                rows,
+                src,
+                neighbours,
+                frames,
+                azimuth,
+                bins,
+            )
+        hops[h - 1] = HopNeighbourhood(neighbours, bins, n_sources)
     if len(config.attributes) > 1:
-        extra = _neighbour_attributes(
-            config,
-            points,
-            queries[0],
-            neighbours[0],
-            octants[0],
-            frames,
-            eigenvalues,
-            n_threads,
-        )
-        hop1 = np.hstack([hop1, extra])
-    return CloudGeometry(n_points=n, hop1_attributes=hop1, poolings=poolings)
-
-
-def _chunk_frames(planes, start, stop, nn_idx, k, centroid, viewpoint, eigen: bool):
-    """The frames of points ``start:stop`` of a cloud (``planes``, ``(3, n)``) from their
-    neighbours ``nn_idx`` (the first ``k`` define the frames), with every neighbour in
-    them, and the eigenvalues when ``eigen``; see :func:`~._frames.local_reference_frames`."""
-    offsets = np.take(planes, nn_idx, axis=1) - planes[:, start:stop, None]
-    towards = centroid - planes[:, start:stop]  # each point to the centroid
-    sensor = None if viewpoint is None else viewpoint[:, None] - planes[:, start:stop]
-    return local_reference_frames(offsets, k, towards, return_eigenvalues=eigen, sensor=sensor)
+        neighbours, bins = stored.pop(0)
+        rows = np.arange(n) if queries[0] is None else queries[0]
+        blocks = [hop1]
+        for name in config.attributes[1:]:
+            if name == "normal":
+                out = np.empty((len(rows), 3 * N_OCTANTS))
+                arrays = (points, rows, neighbours, bins, frames, azimuth, out)
+                run_blocks(_normal_means, len(rows), n_threads, *arrays)
+            else:
+                features = np.ascontiguousarray(eigen_features(eigenvalues))
+                out = np.empty((len(rows), features.shape[1] * N_OCTANTS))
+                run_blocks(_feature_means, len(rows), n_threads, neighbours, bins, features, out)
+            blocks.append(out)
+        hop1 = np.hstack(blocks)
+    return CloudGeometry(n_points=n, hop1_attributes=hop1, hops=hops)
 
 
 def cloud_frames(
@@ -252,92 +443,16 @@ def cloud_frames(
     """The local reference frame of every point of a validated cloud, as the hops use
     it: ``(n, 3, 3)``, ``frames[i, :, j]`` axis ``j`` of point ``i`` (the third is the
     normal)."""
-    n = len(points)
-    frames = np.empty((n, 3, 3))
-    planes = np.ascontiguousarray(points.T)
-    centroid = points.mean(axis=0)[:, None]
-    index = NeighborIndex(points)
-    for start, stop in _chunks(n, 1):
-        nn_idx, _ = index.query(points[start:stop], config.lrf_neighbors)
-        chunk = _chunk_frames(
-            planes, start, stop, nn_idx, config.lrf_neighbors, centroid, viewpoint, False
-        )
-        frames[start:stop] = chunk[0]
-    return frames
-
-
-def _neighbour_attributes(
-    config: HopConfig,
-    points: np.ndarray,
-    queries: np.ndarray,
-    neighbours: np.ndarray,
-    octants: np.ndarray,
-    frames: np.ndarray,
-    eigenvalues: np.ndarray | None,
-    n_threads: int = 1,
-) -> np.ndarray:
-    """Octant means of the hop-1 neighbours' normals (in each query's frame) and
-    eigenvalue features, after ``"xyz"``, in the order of ``config.attributes``.
-
-    A second pass over the hop-1 queries, in the same chunks as the first: every
-    neighbour's own frame and eigenvalues are known only once the first pass is done.
-    With ``pooling="azimuth"`` a neighbour's normal is given by its components along
-    the query's normal, along the direction from the query's axis to the neighbour
-    (radial) and across it (tangential): nothing depends on the query's in-plane axes.
-    """
-    attributes = config.attributes
-    features = eigen_features(eigenvalues) if eigenvalues is not None else None
-    width = sum(ATTRIBUTE_CHANNELS[a] for a in attributes[1:]) * N_OCTANTS
-    out = np.empty((len(queries), width))
-
-    def chunk(lo: int, hi: int) -> None:
-        nb, octant = neighbours[lo:hi], octants[lo:hi]
-        blocks = []
-        for name in attributes[1:]:
-            if name == "normal":
-                # Neighbour j's normal (third axis of its frame) in query i's frame.
-                values = _normals_in_frames(frames, nb, queries[lo:hi])
-                if config.pooling == "azimuth":
-                    values = _about_the_normal(values, points, queries[lo:hi], nb, frames)
-            else:
-                values = np.moveaxis(features[nb], 2, 0)  # (7, q, k)
-            blocks.append(octant_means(values, octant, compiled=True))
-        out[lo:hi] = np.hstack(blocks)
-
-    map_threads(chunk, _chunks(len(queries), n_threads), n_threads)
-    return out
-
-
-@kernel(nogil=True)
-def _normals_in_frames(frames, neighbours, queries):  # pragma: no cover - compiled
-    """Neighbour ``neighbours[q, k]``'s normal (the third axis of its frame) in query
-    ``queries[q]``'s frame, ``(3, q, k)``: component ``j`` is summed ``(n0 f0j + n1 f1j)
-    + n2 f2j``, the order numpy's einsum ``"qkd,qdj->jqk"`` takes (the same bytes),
-    without gathering every neighbour's frame first. Runs without the GIL, so the
-    chunks' threads share it."""
-    q, k = neighbours.shape
-    out = np.empty((3, q, k))
-    for a in range(q):
-        f = frames[queries[a]]
-        for b in range(k):
-            n = frames[neighbours[a, b]]
-            n0, n1, n2 = n[0, 2], n[1, 2], n[2, 2]
-            for j in range(3):
-                out[j, a, b] = (n0 * f[0, j] + n1 * f[1, j]) + n2 * f[2, j]
-    return out
-
-
-def _about_the_normal(
-    normals: np.ndarray, points: np.ndarray, queries: np.ndarray, nb: np.ndarray, frames
-) -> np.ndarray:
-    """Neighbours' normals ``(3, q, k)`` in their queries' frames as radial,
-    tangential and normal components: unchanged by a turn of a frame about its normal
-    axis. A neighbour on the query's axis has no radial direction: both are 0 there."""
-    offsets = points[nb] - points[queries][:, None, :]  # (q, k, 3)
-    axes = frames[queries]
-    x = np.einsum("qkd,qd->qk", offsets, axes[:, :, 0])
-    y = np.einsum("qkd,qd->qk", offsets, axes[:, :, 1])
-    rho = np.sqrt(x * x + y * y)
-    inv = np.divide(1.0, rho, out=np.zeros_like(rho), where=rho > 0.0)
-    a, b = normals[0], normals[1]
-    return np.stack([(a * x + b * y) * inv, (b * x - a * y) * inv, normals[2]])
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    frames_only = HopConfig(
+        hop_sizes=(1.0,),
+        n_neighbors=(config.lrf_neighbors - 1,),
+        lrf_neighbors=config.lrf_neighbors,
+        scale=config.scale,
+        pooling=config.pooling,
+    )
+    search = HopSearch(points)
+    nothing = np.empty(0, dtype=np.int64)  # no hop to pool
+    return _frames_and_full_hops(
+        points, frames_only, search, config.lrf_neighbors - 1, [], [nothing], viewpoint, 1
+    )[0]

@@ -7,10 +7,11 @@ import pytest
 from helpers import CONTRACT, random_motion, relative_difference
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial import cKDTree
 
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import make_blob, make_object
-from o3d_rpointhop.descriptors.pointhop._neighbors import drop_self, knn, spatial_order
+from o3d_rpointhop.descriptors.pointhop._neighbors import HopSearch, spatial_order
 from o3d_rpointhop.descriptors.pointhop._sampling import (
     fps_subsets,
     hop_subsets,
@@ -99,6 +100,32 @@ def test_fps_matches_reference_and_is_nested():
     assert np.isin(small, big).all()
 
 
+@pytest.mark.parametrize("n", [500, 3000])
+def test_fps_on_the_neighbour_lists_picks_what_the_full_update_picks(n):
+    """The same samples, to the bit, whether every pick updates every point or only
+    the neighbours it can reach; and the same as Open3D's farthest point sampling."""
+    import open3d as o3d
+
+    pts = make_object(n, shape_seed=8, sample_seed=n)
+    pts = np.ascontiguousarray(pts[spatial_order(pts)])
+    nb, reach, _ = HopSearch(pts).neighbours(None, 40)
+    sizes = [int(0.75 * n), int(0.5 * n), int(0.1 * n)]
+    full = fps_subsets(pts, sizes)
+    for a, b in zip(fps_subsets(pts, sizes, (nb, reach)), full, strict=True):
+        np.testing.assert_array_equal(a, b)
+    start = int(np.argmax(np.linalg.norm(pts - pts.mean(0), axis=1)))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    picked = np.asarray(cloud.farthest_point_down_sample(sizes[0], start).points)
+    np.testing.assert_array_equal(np.sort(cKDTree(pts).query(picked)[1]), full[0])
+
+
+def test_fps_fills_up_with_duplicates_lowest_rows_first():
+    pts = np.repeat(make_blob(20, shape_seed=3), 3, axis=0)  # every point three times
+    (sample,) = fps_subsets(pts, [30])
+    assert len(np.unique(pts[sample], axis=0)) == 20  # every distinct point first
+    assert len(sample) == 30
+
+
 def test_fps_is_rigid_and_permutation_invariant():
     pts = make_blob(400, shape_seed=9)
     rot, shift = random_motion(1, 50.0)
@@ -110,20 +137,34 @@ def test_fps_is_rigid_and_permutation_invariant():
     np.testing.assert_array_equal(np.sort(perm[permuted]), base)
 
 
-def test_knn_and_drop_self():
-    pts = make_blob(100, shape_seed=10)
-    idx, sq = knn(pts, pts, 5)
-    np.testing.assert_array_equal(idx[:, 0], np.arange(100))
-    brute = np.argsort(((pts[:, None] - pts[None]) ** 2).sum(-1), axis=1)[:, :5]
-    np.testing.assert_array_equal(idx, brute)
-    assert np.all(np.diff(sq, axis=1) >= 0)
-    kept = drop_self(idx, sq, 4)
-    np.testing.assert_array_equal(kept, idx[:, 1:])
-    # A query that is not one of the points keeps its k nearest.
-    far_idx, far_sq = knn(pts, pts[:3] + 10.0, 5)
-    np.testing.assert_array_equal(drop_self(far_idx, far_sq, 4), far_idx[:, :4])
-    with pytest.raises(ValueError, match="cannot take"):
-        knn(pts[:3], pts, 5)
+def test_hop_neighbours_leave_the_query_out_and_serve_every_level():
+    pts = make_blob(300, shape_seed=10)
+    order = np.argsort(((pts[:, None] - pts[None]) ** 2).sum(-1), axis=1, kind="stable")
+    nb, reach, mean_dist = HopSearch(pts).neighbours(None, 12, levels=(5, 11), n_mean=3)
+    assert nb.dtype == np.int32 and nb.shape == (300, 12)
+    for s in (12, 11, 5, 3):  # the first s are the s nearest other points
+        np.testing.assert_array_equal(np.sort(nb[:, :s], axis=1), np.sort(order[:, 1 : s + 1], 1))
+    sq = ((pts[nb] - pts[:, None]) ** 2).sum(-1)
+    np.testing.assert_allclose(reach, sq.max(axis=1))
+    np.testing.assert_allclose(mean_dist, np.sqrt(sq[:, :3]).mean(axis=1))
+    with pytest.raises(ValueError, match="cannot take 300 neighbours among 300"):
+        HopSearch(pts).neighbours(None, 300)
+
+
+def test_hop_neighbours_among_a_sample_by_position():
+    """Sources are a sample: neighbours are positions in it; a query in the sample
+    leaves itself out, a query outside leaves out one source it coincides with."""
+    pts = make_blob(200, shape_seed=11)
+    pts[151] = pts[20]  # row 151 (not sampled) duplicates row 20 (sampled)
+    sample = np.arange(0, 200, 2)
+    queries = np.array([20, 151, 153])
+    nb = HopSearch(pts, sample).neighbours(queries, 6)[0]
+    src = pts[sample]
+    expected = cKDTree(src).query(pts[queries], 7)[1]
+    np.testing.assert_array_equal(np.sort(nb[0]), np.sort(expected[0, 1:]))  # itself out
+    np.testing.assert_array_equal(np.sort(nb[1]), np.sort(expected[1, 1:]))  # its twin out
+    np.testing.assert_array_equal(np.sort(nb[2]), np.sort(expected[2, :6]))  # nothing out
+    assert 10 not in nb[0] and 10 not in nb[1]  # position of row 20 in the sample
 
 
 def test_spatial_order_is_a_permutation_that_keeps_neighbours_together():
