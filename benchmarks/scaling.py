@@ -4,12 +4,15 @@ Every measurement runs in a fresh process (so its peak resident memory is its ow
 interleaved R-PointHop / FPFH on the same cloud. The cloud is a synthetic CAD-like
 object (``make_object``) sampled at each size. FPFH runs at its full-cost setting:
 normals within 6x and histograms within 15x the point spacing, at most 30 and 100
-neighbours (Open3D, all cores). R-PointHop is the pretrained model projected on 128
-principal axes (``pretrained(n_components=128)``, what ``register()`` matches) and on 32,
-on all cores (``n_jobs=-1``); the full 1624-D descriptor is measured too up to 200k
-points (at 1M its float32 output alone is 6.5 GB).
+neighbours. R-PointHop is the pretrained model projected on 128 principal axes
+(``pretrained(n_components=128)``, what ``register()`` matches) and on 32; the full
+1624-D descriptor is measured too up to 200k points (at 1M its float32 output alone is
+6.5 GB). Two thread budgets, the same for both sides: one thread each (Open3D's
+``set_max_threads(1)``, ``n_jobs=1``) and every core each (Open3D's default, the
+descriptor's default ``n_jobs=None``).
 
-Usage: python benchmarks/scaling.py [--sizes 2000 20000 200000 1000000] [--output DIR]
+Usage: python benchmarks/scaling.py [--sizes 2000 20000 200000 1000000]
+       [--budgets one all] [--output DIR]
 Writes DIR/scaling.json, DIR/scaling.md and DIR/scaling.png.
 """
 
@@ -38,10 +41,13 @@ def peak_rss_mb() -> float:
     raise RuntimeError("no VmHWM in /proc/self/status")
 
 
-def child(method: str, n: int, repeats: int) -> None:
+def child(method: str, n: int, repeats: int, budget: str) -> None:
     """Run in a fresh process: describe the cloud ``repeats`` times, print JSON."""
     import numpy as np
     import open3d as o3d
+
+    if budget == "one":
+        o3d.utility.set_max_threads(1)
 
     from o3d_rpointhop import RPointHopTransformer
     from o3d_rpointhop._utils.geometry import point_spacing
@@ -62,7 +68,8 @@ def child(method: str, n: int, repeats: int) -> None:
 
     else:
         k = {"rpointhop-128": 128, "rpointhop-32": 32}.get(method)
-        model = RPointHopTransformer.pretrained(n_components=k).set_params(n_jobs=-1)
+        model = RPointHopTransformer.pretrained(n_components=k)
+        model.set_params(n_jobs=1 if budget == "one" else None)
 
         def run():
             return model.transform(points).shape
@@ -78,6 +85,7 @@ def child(method: str, n: int, repeats: int) -> None:
             {
                 "method": method,
                 "points": n,
+                "budget": budget,
                 "seconds": float(np.median(times)),
                 "repeats": repeats,
                 "peak_rss_mb": peak_rss_mb(),
@@ -88,9 +96,9 @@ def child(method: str, n: int, repeats: int) -> None:
     )
 
 
-def measure(method: str, n: int, repeats: int) -> dict:
+def measure(method: str, n: int, repeats: int, budget: str) -> dict:
     out = subprocess.run(
-        [sys.executable, __file__, "--child", method, str(n), str(repeats)],
+        [sys.executable, __file__, "--child", method, str(n), str(repeats), budget],
         check=True,
         capture_output=True,
         text=True,
@@ -99,7 +107,15 @@ def measure(method: str, n: int, repeats: int) -> dict:
 
 
 def markdown(rows: list[dict], sizes: list[int]) -> str:
-    """Seconds (and the ratio to FPFH in the same run) and peak memory per size."""
+    """Per thread budget, seconds (and the ratio to FPFH in the same run) and peak
+    memory per size."""
+    budgets = sorted({r.get("budget", "all") for r in rows}, key=["one", "all"].index)
+    return "\n".join(
+        _table([r for r in rows if r.get("budget", "all") == b], sizes, b) for b in budgets
+    )
+
+
+def _table(rows: list[dict], sizes: list[int], budget: str) -> str:
     by = {(r["method"], r["points"]): r for r in rows}
     variants = [
         ("rpointhop-128", "128 axes"),
@@ -107,6 +123,8 @@ def markdown(rows: list[dict], sizes: list[int]) -> str:
         ("rpointhop-full", "1624-D"),
     ]
     lines = [
+        f"{'One thread' if budget == 'one' else 'Every core'} each:",
+        "",
         "| points | FPFH s | "
         + " | ".join(f"R-PointHop {label} s (ratio)" for _, label in variants)
         + " | peak MB: FPFH / "
@@ -116,6 +134,8 @@ def markdown(rows: list[dict], sizes: list[int]) -> str:
     ]
     for n in sizes:
         fpfh = by.get(("fpfh", n))
+        if fpfh is None:
+            continue
         cells, peaks = [], [f"{fpfh['peak_rss_mb']:.0f}"]
         for method, _ in variants:
             row = by.get((method, n))
@@ -139,9 +159,15 @@ def plot(rows: list[dict], path: Path) -> None:
         fig.subplots(1, 2), ("seconds", "peak_rss_mb"), ("seconds", "peak memory (MB)"), strict=True
     ):
         for method, name in METHODS.items():
-            pts = sorted((r["points"], r[key]) for r in rows if r["method"] == method)
-            if pts:
-                ax.loglog(*zip(*pts, strict=True), marker="o", label=name)
+            for budget, style in (("one", "--"), ("all", "-")):
+                pts = sorted(
+                    (r["points"], r[key])
+                    for r in rows
+                    if r["method"] == method and r.get("budget", "all") == budget
+                )
+                if pts:
+                    label = f"{name} ({'one thread' if budget == 'one' else 'every core'})"
+                    ax.loglog(*zip(*pts, strict=True), style, marker="o", label=label)
         ax.set_xlabel("points")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.3)
@@ -154,20 +180,22 @@ def plot(rows: list[dict], path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sizes", type=int, nargs="+", default=[2000, 20000, 200000, 1000000])
+    parser.add_argument("--budgets", nargs="+", choices=["one", "all"], default=["one", "all"])
     parser.add_argument("--output", default=str(RESULTS))
-    parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        child(args.child[0], int(args.child[1]), int(args.child[2]))
+        child(args.child[0], int(args.child[1]), int(args.child[2]), args.child[3])
         return
     rows = []
-    for n in args.sizes:
-        repeats = 21 if n <= 2_000 else 5 if n <= 20_000 else 1
-        for method in METHODS:
-            if method == "rpointhop-full" and n > FULL_MAX_POINTS:
-                continue
-            rows.append(measure(method, n, repeats))
-            print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+    for budget in args.budgets:
+        for n in args.sizes:
+            repeats = 21 if n <= 2_000 else 5 if n <= 20_000 else 1
+            for method in METHODS:
+                if method == "rpointhop-full" and n > FULL_MAX_POINTS:
+                    continue
+                rows.append(measure(method, n, repeats, budget))
+                print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     folder = Path(args.output)
     folder.mkdir(parents=True, exist_ok=True)
     import open3d

@@ -55,16 +55,22 @@ def fixed_resolution(voxel: float) -> Callable[[object], float]:
 
 
 def machine_facts() -> dict:
-    """The machine and library versions a run was measured with."""
+    """The machine, the library versions and the thread budget (see
+    :data:`~.methods.THREAD_BUDGETS`) a run was measured with."""
     import os
 
     import open3d
+
+    from .._version import __version__
+    from .methods import current_thread_budget
 
     return {
         "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores",
         "python": platform.python_version(),
         "open3d": open3d.__version__,
         "numpy": np.__version__,
+        "o3d_rpointhop": __version__,
+        "thread_budget": current_thread_budget(),
     }
 
 

@@ -16,11 +16,13 @@ from __future__ import annotations
 import sys
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 import open3d as o3d
+from joblib import parallel_config
 
 from .._utils.threads import repeatable_open3d
 from ..descriptors import FPFHTransformer, RPointHopTransformer
@@ -64,10 +66,17 @@ def _fpfh_recipe_inputs(source, target, voxel, viewpoints=None):
 
 
 def feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
-    """Open3D's RANSAC on feature matches, as in its global registration tutorial."""
+    """Open3D's RANSAC on feature matches, as in its global registration tutorial (on one
+    thread: only so does a seed repeat it, see ``repeatable_open3d``)."""
     distance = 1.5 * voxel
     o3d.utility.random.seed(seed)
-    result = reg.registration_ransac_based_on_feature_matching(
+    with repeatable_open3d():
+        result = _open3d_ransac(src, tgt, f_src, f_tgt, mutual_filter, distance)
+    return np.array(result.transformation)
+
+
+def _open3d_ransac(src, tgt, f_src, f_tgt, mutual_filter, distance):
+    return reg.registration_ransac_based_on_feature_matching(
         src,
         tgt,
         f_src,
@@ -82,7 +91,6 @@ def feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
         ],
         reg.RANSACConvergenceCriteria(100000, 0.999),
     )
-    return np.array(result.transformation)
 
 
 def _fpfh_ransac(source, target, voxel, seed, viewpoints=None):
@@ -112,13 +120,9 @@ def _rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints=None
 def _fpfh_fgr(source, target, voxel, seed, viewpoints=None):
     src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel, viewpoints)
     o3d.utility.random.seed(seed)
-    result = reg.registration_fgr_based_on_feature_matching(
-        src,
-        tgt,
-        f_src,
-        f_tgt,
-        reg.FastGlobalRegistrationOption(maximum_correspondence_distance=0.5 * voxel),
-    )
+    option = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=0.5 * voxel)
+    with repeatable_open3d():
+        result = reg.registration_fgr_based_on_feature_matching(src, tgt, f_src, f_tgt, option)
     return np.array(result.transformation)
 
 
@@ -175,8 +179,7 @@ class Method:
         The R-PointHop model it describes with: the benchmark's (``"given"``), the
         shipped scene model, each pair's leave-one-scene-out model, or none (FPFH, ICP).
     open3d_only : bool
-        Open3D calls from end to end: run on one thread (``repeatable_open3d``), as the
-        library's own steps run Open3D.
+        Open3D calls from end to end (a recipe).
     """
 
     name: str
@@ -487,6 +490,47 @@ def check_methods(methods, dataset: str) -> list[str]:
     return methods
 
 
+#: The thread budgets a benchmark can give both sides: ``"one"`` thread each (this
+#: library's kernels and Open3D's code alike), or ``"all"``: every core each (this
+#: library's kernels, and Open3D's normals, features and ICP; Open3D's RANSAC and FGR
+#: stay on one thread, the only way a seed repeats them).
+THREAD_BUDGETS = ("one", "all")
+_BUDGET = ["one"]
+
+
+@contextmanager
+def thread_budget(name: str) -> Iterator[None]:
+    """Run the benchmarks inside on the thread budget ``name`` (see
+    :data:`THREAD_BUDGETS`)."""
+    if name not in THREAD_BUDGETS:
+        raise ValueError(f"thread budget must be one of {THREAD_BUDGETS}, got {name!r}")
+    previous = _BUDGET[0]
+    _BUDGET[0] = name
+    try:
+        yield
+    finally:
+        _BUDGET[0] = previous
+
+
+def current_thread_budget() -> str:
+    """The thread budget methods run on now."""
+    return _BUDGET[0]
+
+
+@contextmanager
+def _budgeted() -> Iterator[None]:
+    """This library's kernels (``joblib.parallel_config``) and Open3D on the budget."""
+    one = _BUDGET[0] == "one"
+    previous = o3d.utility.get_max_threads()
+    if one:
+        o3d.utility.set_max_threads(1)
+    try:
+        with parallel_config(n_jobs=1 if one else -1):
+            yield
+    finally:
+        o3d.utility.set_max_threads(previous)
+
+
 @dataclass(frozen=True)
 class MethodRun:
     """What one method did on one pair.
@@ -553,21 +597,13 @@ def run_method(
         _recipe_model()
     # Flagged results are scored like any other; the flags' warnings would only repeat.
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says
-    # it. Its RANSAC is only repeatable on one thread (see repeatable_open3d), as ours
-    # runs.
+    # it. Both sides run on the same thread budget (thread_budget).
     with (
         warnings.catch_warnings(),
         o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error),
+        _budgeted(),
     ):
         warnings.simplefilter("ignore", RegistrationWarning)
         start = time.perf_counter()
-        if method.open3d_only:
-            with repeatable_open3d():
-                transformation, claimed = method.run(
-                    source, target, descriptor, voxel, seed, viewpoints
-                )
-        else:
-            transformation, claimed = method.run(
-                source, target, descriptor, voxel, seed, viewpoints
-            )
+        transformation, claimed = method.run(source, target, descriptor, voxel, seed, viewpoints)
         return MethodRun(transformation, time.perf_counter() - start, claimed)

@@ -50,9 +50,9 @@ MULTIWAY = (
 )
 #: The descriptor scaling script's methods (``benchmarks/scaling.py``).
 SCALING = (
-    Entry("scaling", "rpointhop-128", "R-PointHop, pretrained, 128 principal axes, n_jobs=-1"),
-    Entry("scaling", "rpointhop-32", "R-PointHop, pretrained, 32 principal axes, n_jobs=-1"),
-    Entry("scaling", "rpointhop-full", "R-PointHop, pretrained, 1624-D, n_jobs=-1"),
+    Entry("scaling", "rpointhop-128", "R-PointHop, pretrained, 128 principal axes"),
+    Entry("scaling", "rpointhop-32", "R-PointHop, pretrained, 32 principal axes"),
+    Entry("scaling", "rpointhop-full", "R-PointHop, pretrained, 1624-D"),
     Entry(
         "scaling",
         "fpfh",

@@ -19,7 +19,7 @@ from .methods import METHODS
 __all__ = ["TIMING_KEYS", "split_timings", "markdown", "write_split", "write_report"]
 
 #: Keys whose values are wall times or depend on the machine, wherever they occur.
-TIMING_KEYS = frozenset({"seconds", "seconds_per_pair", "fit_seconds", "machine"})
+TIMING_KEYS = frozenset({"seconds", "seconds_per_pair", "fit_seconds", "machine", "thread_budget"})
 
 
 def split_timings(results):
@@ -264,7 +264,9 @@ def timings_markdown(results: dict) -> str:
     """Markdown table of the wall times: seconds per pair, per protocol and method."""
     settings = results["settings"]
     lines = [f"# Benchmark timings: {results['dataset']}", ""]
-    lines += [f"Machine: {settings.get('machine', '?')}; seed {settings['seed']}.", ""]
+    budget = settings.get("thread_budget")
+    threads = f"; {'one thread' if budget == 'one' else 'every core'} each" if budget else ""
+    lines += [f"Machine: {settings.get('machine', '?')}{threads}; seed {settings['seed']}.", ""]
     lines += ["| protocol | method | s per pair |", "|---|---|---|"]
     for name, protocol in results["protocols"].items():
         summaries = protocol["summary"]

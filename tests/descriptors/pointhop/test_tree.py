@@ -11,7 +11,7 @@ import o3d_rpointhop._utils.threads as threads_module
 import o3d_rpointhop.descriptors.pointhop._geometry as hops
 import o3d_rpointhop.descriptors.pointhop._tree as tree_module
 from o3d_rpointhop import RPointHopTransformer
-from o3d_rpointhop.datasets import make_blob
+from o3d_rpointhop.datasets import make_blob, make_object
 
 
 # ----------------------------------------------------------------------------- determinism
@@ -94,6 +94,17 @@ def test_descriptors_do_not_depend_on_the_internal_order_beyond_rounding(fitted,
     reverse = lambda points: np.arange(len(points))[::-1]  # noqa: E731
     monkeypatch.setattr(tree_module, "spatial_order", reverse)
     assert relative_difference(fitted.transform(cloud), spatial) < CONTRACT
+
+
+def test_a_permuted_cloud_gets_the_same_bytes_permuted():
+    """Every cloud is described in its Morton arrangement, which a permutation does not
+    change (no two points of these clouds share a cell), so the sums run in the same
+    order: the same bytes, not just the same values to rounding."""
+    model = RPointHopTransformer.pretrained(n_components=128)
+    for seed in (0, 5, 9):
+        cloud = make_object(2000, shape_seed=seed, sample_seed=seed)
+        perm = np.random.default_rng(seed).permutation(len(cloud))
+        np.testing.assert_array_equal(model.transform(cloud[perm]), model.transform(cloud)[perm])
 
 
 @pytest.mark.parametrize("model", ["fitted", "scene"])
