@@ -11,10 +11,12 @@ upgrading any of them starts a fresh folder, and a kernel is never loaded with a
 helper inside. With no writable folder the kernel is compiled for the process alone,
 so a read-only install works too.
 
-Threads: kernels declared ``parallel=True`` run on :func:`threads` threads, which the
-caller sets from its ``n_jobs`` (``numba.set_num_threads`` applies to the calling
-thread only, so joblib or Dask workers, which run with ``n_jobs=None``, use one thread
-each and never oversubscribe).
+Threads: the library's kernels are serial and release the GIL (``nogil=True``); their
+callers share the work out in pieces among the process's thread pool
+(:func:`~o3d_rpointhop._utils.threads.run_blocks`), which a forked child starts anew.
+numba's own parallel layer (GNU OpenMP) does not survive a fork; the kernels declared
+``parallel=True`` (the SC2-PCR benchmark peer's) run on :func:`threads` threads, which
+the caller sets from its ``n_jobs``.
 """
 
 from __future__ import annotations

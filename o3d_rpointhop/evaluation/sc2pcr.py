@@ -36,7 +36,7 @@ from .._utils.params import Interval
 from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
 from ..registration.steps import ConsensusGlobal
-from ..registration.steps._consensus import _bits, _consensus_sets
+from ..registration.steps._consensus import _bits, consensus_sets
 from ..transforms import rigid_transforms
 
 __all__ = ["SC2PCRGlobal", "sc2pcr"]
@@ -196,13 +196,12 @@ def sc2pcr(
     centre = target.mean(axis=0)  # small coordinates wherever the clouds are
     source = np.ascontiguousarray(source - centre)
     target = np.ascontiguousarray(target - centre)
-    hard, tight, _ = _bits(source, target, threshold, threshold / 2, 0.0, None)
+    hard, tight, _ = _bits(source, target, threshold, threshold / 2, 0.0, None, n_threads)
     with threads(n_threads):
         confidence = _soft_leading_vector(hard, source, target, float(threshold), iterations)
     seeds = _seeds(source, confidence, seed_radius, seed_ratio)
     k1 = min(first_stage, len(source))
-    with threads(n_threads):
-        members, _ = _consensus_sets(_with_diagonal(hard), _with_diagonal(tight), seeds, k1)
+    members, _ = consensus_sets(_with_diagonal(hard), _with_diagonal(tight), seeds, k1, n_threads)
     # Second stage: within each first-stage set, the matches hard-compatible with the
     # most of those compatible with the set's first (the seed).
     src, tgt = source[members], target[members]

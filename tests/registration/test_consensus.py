@@ -251,8 +251,8 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
     lower index) and the truncated scores, against plain numpy on dense matrices."""
     from o3d_rpointhop.registration.steps._consensus import (
         _bits,
-        _consensus_sets,
-        _truncated_scores,
+        consensus_sets,
+        truncated_scores,
     )
 
     rng = np.random.default_rng(m)
@@ -267,7 +267,13 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
 
     seeds = np.arange(0, m, 2, dtype=np.int64)
     k = min(4, m - 1)
-    members, scores = _consensus_sets(bits, bits2, seeds, k)
+    members, scores = consensus_sets(bits, bits2, seeds, k)
+    for n_threads in (2, 3):  # the same bytes on any number of threads
+        again = consensus_sets(bits, bits2, seeds, k, n_threads)
+        np.testing.assert_array_equal(again[0], members)
+        np.testing.assert_array_equal(again[1], scores)
+        threaded = _bits(source, target, 0.1, 0.05, 0.2, ends, n_threads)
+        np.testing.assert_array_equal(threaded[1], bits2)
     shared = second.astype(np.int64) @ second.astype(np.int64)
     for s, i in enumerate(seeds):
         partners = np.flatnonzero(first[i])
@@ -279,7 +285,7 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
 
     rot = np.stack([np.eye(3), np.diag([1.0, -1.0, -1.0])] * 40)[: m + 3]
     shift = rng.normal(scale=0.05, size=(len(rot), 3))
-    found = _truncated_scores(
+    found = truncated_scores(
         np.ascontiguousarray(rot.reshape(-1, 9).T),
         np.ascontiguousarray(shift.T),
         source,

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..._utils.compiled import kernel, popcount, prange, threads
+from ..._utils.compiled import kernel, popcount
+from ..._utils.threads import run_blocks
 from ...transforms import rigid_transform, rigid_transforms
 from ._refit import refit_while_growing
 
@@ -60,34 +61,42 @@ class ConsensusResult:
     seeds: np.ndarray
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
 def _compatibility_bits(
-    source, target, threshold, second_threshold, min_span, source_index, target_index
+    start,
+    stop,
+    source,
+    target,
+    threshold,
+    second_threshold,
+    min_span,
+    source_index,
+    target_index,
+    bits,
+    second,
+    degree,
 ):  # pragma: no cover - compiled
     """The compatibility graphs as bit rows: bit ``j`` of row ``i`` set when matches
     ``i != j`` keep their length to within ``threshold`` (first order) or
     ``second_threshold`` (the graph whose common neighbours are counted), unless the
     pair is masked: its lengths sum to less than ``min_span`` (too close on both sides
     to say anything about a rotation) or the two matches share a source or a target
-    point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Returns both
-    graphs ``(m, ceil(m / 64))`` uint64 (the same array when the thresholds are equal)
-    and the first graph's degrees.
+    point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Writes the
+    blocks of 64 rows ``start:stop`` of both graphs ``bits`` and ``second`` ``(m,
+    ceil(m / 64))`` uint64 (the same array when the thresholds are equal) and of the
+    first graph's degrees.
 
-    Every row is built on its own, in blocks of 64 rows run in parallel: a row's
-    lengths first (one pass over the matches, in SIMD lanes), then its words. Each pair
-    is measured from both ends, with the same bits either way (the differences only
-    change sign)."""
+    Every row is built on its own: its lengths first (one pass over the matches, in
+    SIMD lanes), then its words. Each pair is measured from both ends, with the same
+    bits either way (the differences only change sign)."""
     m = source.shape[1]
     words = (m + 63) // 64
     same = second_threshold == threshold
-    bits = np.zeros((m, words), dtype=np.uint64)
-    second = bits if same else np.zeros((m, words), dtype=np.uint64)
-    degree = np.zeros(m, dtype=np.int64)
     sx, sy, sz = source[0], source[1], source[2]
     tx, ty, tz = target[0], target[1], target[2]
-    for block in prange(words):
-        ds = np.empty(m)
-        dt = np.empty(m)
+    ds = np.empty(m)
+    dt = np.empty(m)
+    for block in range(start, stop):
         for i in range(block * 64, min(m, block * 64 + 64)):
             xi, yi, zi = sx[i], sy[i], sz[i]
             ui, vi, wi = tx[i], ty[i], tz[i]
@@ -121,27 +130,27 @@ def _compatibility_bits(
                 if not same:
                     second[i, w] = word2
             degree[i] = count
-    return bits, second, degree
 
 
-@kernel(parallel=True)
-def _consensus_sets(bits, second, seeds, set_size):  # pragma: no cover - compiled
+@kernel(nogil=True)
+def _consensus_sets(
+    start, stop, bits, second, seeds, set_size, members, scores
+):  # pragma: no cover - compiled
     """For every seed, its ``set_size`` partners (compatible with it in ``bits``) with
     the highest second-order compatibility, the number of matches compatible with both
     in ``second`` (ties: the lower index), and those scores; a seed with fewer
     compatible matches is padded with itself at score 0.
 
-    Seeds go in blocks of 64, run in parallel: a block walks the matches once, in
-    index order, and compares each row of ``second`` with the rows of the block's
-    seeds it is compatible with (every row read once per block, not once per seed).
-    Each seed keeps its best partners so far in order, a newcomer going after the
-    partners it does not beat, which is the order of a stable sort."""
+    Writes the blocks of 64 seeds ``start:stop`` of ``members`` and ``scores``. A block
+    walks the matches once, in index order, and compares each row of ``second`` with
+    the rows of the block's seeds it is compatible with (every row read once per
+    block, not once per seed). Each seed keeps its best partners so far in order, a
+    newcomer going after the partners it does not beat, which is the order of a stable
+    sort."""
     m, words = bits.shape
     n = seeds.shape[0]
-    members = np.empty((n, set_size), dtype=np.int64)
-    scores = np.zeros((n, set_size), dtype=np.float64)
     one = np.uint64(1)
-    for block in prange((n + 63) // 64):
+    for block in range(start, stop):
         first = block * 64
         size = min(n, first + 64) - first
         own = seeds[first : first + size]
@@ -177,22 +186,22 @@ def _consensus_sets(bits, second, seeds, set_size):  # pragma: no cover - compil
                     scores[first + s, r] = value[s, r]
                 else:
                     members[first + s, r] = own[s]
-    return members, scores
 
 
-@kernel(parallel=True)
-def _truncated_scores(rot, shift, source, target, sq_threshold):  # pragma: no cover
+@kernel(nogil=True)
+def _truncated_scores(
+    start, stop, rot, shift, source, target, sq_threshold, out
+):  # pragma: no cover - compiled
     """Every hypothesis's ``sum(max(0, 1 - r^2 / tau^2))`` over all matches.
 
     ``rot`` comes as ``(9, n)`` (row-major entries of each rotation), ``shift`` as
-    ``(3, n)``. Hypotheses go in blocks of 64, run in parallel; within a block the
-    matches are the outer loop and the hypotheses the inner one, so SIMD lanes hold
+    ``(3, n)``. Writes the blocks of 64 hypotheses ``start:stop`` of ``out``; within a
+    block the matches are the outer loop and the hypotheses the inner one, so SIMD lanes hold
     different hypotheses and each hypothesis is still summed match by match, in
     order."""
     n = rot.shape[1]
     m = source.shape[0]
-    out = np.zeros(n)
-    for block in prange((n + 63) // 64):
+    for block in range(start, stop):
         first = block * 64
         last = min(n, first + 64)
         total = np.zeros(last - first)
@@ -206,10 +215,9 @@ def _truncated_scores(rot, shift, source, target, sq_threshold):  # pragma: no c
                 r2 = a * a + b * b + c * c
                 total[h - first] += (1.0 - r2 / sq_threshold) if r2 < sq_threshold else 0.0
         out[first:last] = total
-    return out
 
 
-def _bits(source, target, threshold, second_threshold, min_span, endpoints):
+def _bits(source, target, threshold, second_threshold, min_span, endpoints, n_threads=1):
     """Both compatibility graphs and the first's degrees (see
     :func:`_compatibility_bits`); ``endpoints`` None masks no shared endpoint."""
     m = len(source)
@@ -218,16 +226,58 @@ def _bits(source, target, threshold, second_threshold, min_span, endpoints):
         source_index = target_index = np.arange(m, dtype=np.int64)
     else:
         source_index, target_index = (np.asarray(e, dtype=np.int64) for e in endpoints)
-    second = threshold if second_threshold is None else second_threshold
-    return _compatibility_bits(
+    second_threshold = threshold if second_threshold is None else second_threshold
+    words = (m + 63) // 64
+    bits = np.zeros((m, words), dtype=np.uint64)
+    second = bits if second_threshold == threshold else np.zeros((m, words), dtype=np.uint64)
+    degree = np.zeros(m, dtype=np.int64)
+    run_blocks(
+        _compatibility_bits,
+        words,
+        n_threads,
         np.ascontiguousarray(np.asarray(source, dtype=np.float64).T),
         np.ascontiguousarray(np.asarray(target, dtype=np.float64).T),
         float(threshold),
-        float(second),
+        float(second_threshold),
         float(min_span),
         np.ascontiguousarray(source_index),
         np.ascontiguousarray(target_index),
+        bits,
+        second,
+        degree,
     )
+    return bits, second, degree
+
+
+def consensus_sets(
+    bits: np.ndarray, second: np.ndarray, seeds: np.ndarray, set_size: int, n_threads: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every seed's ``set_size`` best partners and their scores (see
+    :func:`_consensus_sets`), ``(n_seeds, set_size)`` each, on ``n_threads`` threads."""
+    n = len(seeds)
+    members = np.empty((n, set_size), dtype=np.int64)
+    scores = np.zeros((n, set_size), dtype=np.float64)
+    seeds = np.ascontiguousarray(seeds, dtype=np.int64)
+    arrays = (bits, second, seeds, int(set_size), members, scores)
+    run_blocks(_consensus_sets, (n + 63) // 64, n_threads, *arrays)
+    return members, scores
+
+
+def truncated_scores(
+    rot: np.ndarray,
+    shift: np.ndarray,
+    source: np.ndarray,
+    target: np.ndarray,
+    sq_threshold: float,
+    n_threads: int = 1,
+) -> np.ndarray:
+    """Every hypothesis's truncated quadratic score over the matches (see
+    :func:`_truncated_scores`; ``rot`` ``(9, n)``, ``shift`` ``(3, n)``)."""
+    n = rot.shape[1]
+    out = np.zeros(n)
+    arrays = (rot, shift, source, target, float(sq_threshold), out)
+    run_blocks(_truncated_scores, (n + 63) // 64, n_threads, *arrays)
+    return out
 
 
 def compatibility(
@@ -376,28 +426,32 @@ def consensus(
     centre = target.mean(axis=0)
     source = np.ascontiguousarray(source - centre)
     target = np.ascontiguousarray(target - centre)
-    with threads(n_threads):
-        bits, second, degree = _bits(
-            source, target, compatibility_threshold, second_order_threshold, min_span, endpoints
-        )
+    bits, second, degree = _bits(
+        source,
+        target,
+        compatibility_threshold,
+        second_order_threshold,
+        min_span,
+        endpoints,
+        n_threads,
+    )
     seeds = _seeds(source, degree, n_seeds, seed_radius)
     transformation = np.eye(4)
     sq_inlier = inlier_threshold**2
     if len(seeds):
         k = min(set_size, m - 1)
-        with threads(n_threads):
-            partners, weights = _consensus_sets(bits, second, seeds, k)
-            members = np.concatenate([seeds[:, None], partners], axis=1)
-            weights = np.concatenate([weights.max(axis=1, keepdims=True), weights], axis=1)
-            rot, shift = rigid_transforms(source[members], target[members], weights)
-            sq_score = float(score_threshold) ** 2
-            score = _truncated_scores(
-                np.ascontiguousarray(rot.reshape(-1, 9).T),
-                np.ascontiguousarray(shift.T),
-                source,
-                target,
-                sq_score,
-            )
+        partners, weights = consensus_sets(bits, second, seeds, k, n_threads)
+        members = np.concatenate([seeds[:, None], partners], axis=1)
+        weights = np.concatenate([weights.max(axis=1, keepdims=True), weights], axis=1)
+        rot, shift = rigid_transforms(source[members], target[members], weights)
+        score = truncated_scores(
+            np.ascontiguousarray(rot.reshape(-1, 9).T),
+            np.ascontiguousarray(shift.T),
+            source,
+            target,
+            float(score_threshold) ** 2,
+            n_threads,
+        )
         allowed = np.ones(len(score), dtype=bool) if upright is None else upright(rot)
         best = int(np.argmax(np.where(allowed, score, -1.0)))  # the first of equal scores
     if len(seeds) and allowed[best]:

@@ -7,9 +7,9 @@ from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
-from joblib import effective_n_jobs
 
 from ..._utils.params import Interval, StrOptions
+from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
 from ..result import StepResult
@@ -92,8 +92,10 @@ class ConsensusGlobal(GlobalStep):
         Weight the final refit's matches by their residual (a truncated quadratic)
         instead of equally.
     n_jobs : int, default=None
-        Threads of the compiled set building and scoring (``None``: 1, ``-1``: all
-        cores); the result does not depend on it.
+        Threads of the compiled graph, set building and scoring (``None``: every core,
+        within ``OMP_NUM_THREADS``, ``threadpoolctl``'s limits, ``joblib.parallel_config``
+        and, inside a joblib worker, one; ``-1``: all cores); the result does not
+        depend on it.
     """
 
     _parameter_constraints = {
@@ -197,7 +199,7 @@ class ConsensusGlobal(GlobalStep):
             set_size=int(self.set_size),
             weighted_refit=self.weighted_refit,
             upright=None if context.up is None else context.upright,
-            n_threads=max(1, effective_n_jobs(self.n_jobs)),
+            n_threads=kernel_threads(self.n_jobs),
         )
         return self._measured(
             context,
