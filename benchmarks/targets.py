@@ -27,6 +27,7 @@ Writes ``benchmarks/results/targets.md`` and replaces the table between the
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import statistics
 import subprocess
@@ -205,8 +206,12 @@ def register_rows() -> list[tuple[str, str, str]]:
         )
     tutorial = _load("open3d_tutorial.json")
     if tutorial is not None:
-        for _, words, _suffix in BUDGETS:
-            run = tutorial["runs"].get(f"bunny/{_}")
+        sets = {
+            "bunny-neighbours": "the bunny's ring scans 45 deg apart",
+            "bunny": "every bunny scan to bun000",
+        }
+        for (pairs, what), (_, words, _suffix) in itertools.product(sets.items(), BUDGETS):
+            run = tutorial["runs"].get(f"{pairs}/{_}")
             if run is None:
                 continue
             summary = run["summary"]
@@ -218,7 +223,7 @@ def register_rows() -> list[tuple[str, str, str]]:
             rows.append(
                 (
                     "Open3D's tutorial with R-PointHop features at most 1.0x FPFH's flow, "
-                    f"every pair placed (the bunny's pairs, {words})",
+                    f"every pair placed ({what}, {words})",
                     f"{ours['ratio_to_fpfh']:.2f}x; placed {ours['placed']} / {ours['runs']} "
                     f"runs (FPFH {fpfh['placed']} / {fpfh['runs']})",
                     "met" if ours["ratio_to_fpfh"] <= 1.0 and every else "missed",

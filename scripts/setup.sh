@@ -51,6 +51,21 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
         echo "setup: pip install failed (log above, also in $log)" >&2
         exit 1
     fi
+    # The compiled kernels compile on first use (10-20 s once per environment, then
+    # loaded from numba's cache): compile them now, so that the first command is warm.
+    echo "setup: compiling the kernels (once per environment)"
+    if ! .venv/bin/python -c "
+from o3d_rpointhop import RPointHopTransformer, register
+from o3d_rpointhop.datasets import make_object
+cloud = make_object(1500)
+register(cloud + 0.1, cloud)
+register(cloud + 0.1, cloud, global_method='consensus')
+RPointHopTransformer.pretrained('scene').transform(cloud, viewpoints='origin')
+" > "$log" 2>&1; then
+        cat "$log" >&2
+        echo "setup: compiling the kernels failed (log above)" >&2
+        exit 1
+    fi
     echo "$want" > "$stamp"
 fi
 echo "setup: ready (.venv/bin/o3d-rpointhop, .venv/bin/python -m pytest)"

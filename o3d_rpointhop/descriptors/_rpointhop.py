@@ -3,6 +3,8 @@ transform, save and load around the hop maths of :mod:`.pointhop`."""
 
 from __future__ import annotations
 
+import copy
+import threading
 from collections.abc import Sequence
 from numbers import Integral, Real
 from os import PathLike
@@ -432,7 +434,9 @@ class RPointHopTransformer(BaseDescriptor):
         Returns
         -------
         RPointHopTransformer
-            A fitted model, loaded without pickle.
+            A fitted model, loaded without pickle. The file is read once per process:
+            every model this returns shares its fitted arrays, which are read-only
+            (``copy.deepcopy(model)`` gives writable ones; a new ``fit`` replaces them).
         """
         if name not in PRETRAINED_MODELS:
             raise ValueError(
@@ -440,8 +444,10 @@ class RPointHopTransformer(BaseDescriptor):
             )
         if n_components == "default":
             n_components = PRETRAINED_COMPONENTS[name]
-        with pretrained_path(name) as path:
-            model = cls.load(path)
+        model = copy.copy(_shipped(cls, name))
+        for attr, value in vars(model).items():
+            if isinstance(value, list):  # a list of its own, the same read-only arrays
+                setattr(model, attr, list(value))
         model.set_params(n_components=n_components)
         model._projection()  # a clear error for more axes than the file holds
         return model
@@ -457,3 +463,26 @@ class RPointHopTransformer(BaseDescriptor):
             version, or is damaged.
         """
         return load_model(cls, path)
+
+
+#: Each shipped model as read from its file, read once per process and per class:
+#: ``register()`` asks for the default descriptor on every call, and reading the
+#: archive cost as much as describing a 1k-point cloud. Sharing the same arrays also
+#: lets the last hop's folded projection be computed once.
+_SHIPPED: dict[tuple[type, str], Any] = {}
+_SHIPPED_LOCK = threading.Lock()
+
+
+def _shipped(cls: type, name: str) -> Any:
+    """The shipped model ``name`` loaded as ``cls``, its fitted arrays read-only."""
+    with _SHIPPED_LOCK:
+        model = _SHIPPED.get((cls, name))
+        if model is None:
+            with pretrained_path(name) as path:
+                model = cls.load(path)
+            for value in vars(model).values():
+                for arr in value if isinstance(value, list) else [value]:
+                    if isinstance(arr, np.ndarray):
+                        arr.flags.writeable = False
+            _SHIPPED[(cls, name)] = model
+        return model

@@ -53,3 +53,33 @@ def test_shipped_scene_model_comes_as_measured():
     objects = RPointHopTransformer.pretrained()
     assert objects.n_features_out_ == 1624 and not hasattr(objects, "registration_points_")
     assert not hasattr(objects, "registration_global_method_")
+
+
+def test_pretrained_models_share_one_read_only_copy_of_the_file(monkeypatch):
+    import copy
+    import pickle
+
+    from o3d_rpointhop.datasets import make_object
+    from o3d_rpointhop.descriptors import _rpointhop
+
+    first = RPointHopTransformer.pretrained(n_components=32)
+    # A second call does not read the file again.
+    monkeypatch.setattr(_rpointhop, "pretrained_path", None)
+    second = RPointHopTransformer.pretrained(n_components=None)
+    assert first.kernels_ is not second.kernels_  # lists of their own ...
+    assert all(a is b for a, b in zip(first.kernels_, second.kernels_, strict=True))
+    assert first.components_ is second.components_  # ... holding the same arrays
+    assert first.n_components == 32 and second.n_components is None
+    with pytest.raises(ValueError, match="read-only"):
+        first.kernels_[0][0, 0, 0] = 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        first.components_[0, 0] = 1.0
+    second.kernels_.append(None)  # a model's own list: the shared one is untouched
+    assert len(RPointHopTransformer.pretrained().kernels_) == len(first.kernels_)
+    # A deep copy and a pickled copy are writable; describing does not depend on it.
+    own = copy.deepcopy(first)
+    own.kernels_[0][0, 0, 0] += 0.0
+    cloud = make_object(600, shape_seed=2)
+    expected = first.transform(cloud)
+    np.testing.assert_array_equal(own.transform(cloud), expected)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(first)).transform(cloud), expected)
