@@ -135,21 +135,9 @@ def _recipe_icp(source, target, voxel, init):
     return np.array(result.transformation)
 
 
-_LOADED: dict = {}
-
-
-def _recipe_model():
-    """Loaded once per process (loading is not part of the recipe's time)."""
-    if "recipe" not in _LOADED:
-        _LOADED["recipe"] = open3d_recipe_descriptor()
-    return _LOADED["recipe"]
-
-
 def shipped_scene_model():
-    """The shipped scene model, loaded once per process."""
-    if "scene" not in _LOADED:
-        _LOADED["scene"] = RPointHopTransformer.pretrained("scene")
-    return _LOADED["scene"]
+    """The shipped scene model (``pretrained()`` reads its file once per process)."""
+    return RPointHopTransformer.pretrained("scene")
 
 
 #: The pair datasets a method can be run on (multiway has its own descriptor list).
@@ -279,7 +267,8 @@ def _run_kiss_matcher(source, target, descriptor, voxel, seed, viewpoints):
 
 
 def _run_rpointhop_open3d(source, target, descriptor, voxel, seed, viewpoints):
-    estimate = _rpointhop_open3d_ransac(source, target, voxel, seed, _recipe_model(), viewpoints)
+    model = open3d_recipe_descriptor()
+    estimate = _rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints)
     return _recipe_icp(source, target, voxel, estimate), None
 
 
@@ -590,11 +579,11 @@ def run_method(
             "(or kiss-matcher)"
         )
     method = METHODS[name]
-    # Loading a model file is not part of a method's time.
+    # Reading a model file is not part of a method's time: read it now, once per process.
     if method.model == "scene":
         descriptor = shipped_scene_model()
     if name == "rpointhop-open3d-ransac-icp":
-        _recipe_model()
+        open3d_recipe_descriptor()
     # Flagged results are scored like any other; the flags' warnings would only repeat.
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says
     # it. Both sides run on the same thread budget (thread_budget).
