@@ -41,12 +41,12 @@ fi
 stamp=.venv/.o3d-rpointhop-installed
 want=$(cksum pyproject.toml | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "setup: installing o3d-rpointhop and its test, plot, distributed, survey-file, HDF5 and viewer extras"
+    echo "setup: installing o3d-rpointhop and its test, plot, distributed, survey-file, HDF5, viewer and benchmark-peer extras"
     # pip's notices go to a log, shown only if the install fails.
     log=.venv/pip-install.log
     if ! { .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip &&
         .venv/bin/python -m pip install -q --disable-pip-version-check \
-            -e ".[test,plot,distributed,las,e57,h5,view]"; } > "$log" 2>&1; then
+            -e ".[test,plot,distributed,las,e57,h5,view,peers]"; } > "$log" 2>&1; then
         cat "$log" >&2
         echo "setup: pip install failed (log above, also in $log)" >&2
         exit 1

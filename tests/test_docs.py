@@ -82,10 +82,30 @@ def test_every_document_with_code_is_tested():
             assert runnable, f"{document.name}: every python block needs the shared data"
 
 
+#: What each example prints that says it worked: a pattern with one number, how many
+#: times it must appear, and the bound each number must meet.
+EXAMPLE_CLAIMS = {
+    "describe_and_match.py": (r"register\(\): ([\d.]+) deg off", 2, lambda v: v < 5),
+    "grid_search.py": (r"recall=([\d.]+)", 4, lambda v: 0 <= v <= 1),
+    "register_pair.py": (r"rotation error\s+([\d.]+) deg", 3, lambda v: v < 5),
+    "register_scene.py": (r"rotation error ([\d.]+) deg", 2, lambda v: v < 15),
+    "sklearn_pipeline.py": (r"clusters agree after a rotation: ([\d.]+)%", 1, lambda v: v > 90),
+}
+
+
 @pytest.mark.parametrize("script", sorted((ROOT / "examples").glob("*.py")), ids=lambda p: p.name)
 def test_examples_run(script, tmp_path, monkeypatch):
+    """Every example runs and prints the results it claims: errors within bounds."""
     monkeypatch.chdir(tmp_path)
-    runpy.run_path(str(script), run_name="__main__")
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        runpy.run_path(str(script), run_name="__main__")
+    pattern, count, meets = EXAMPLE_CLAIMS[script.name]
+    values = [float(v) for v in re.findall(pattern, out.getvalue())]
+    assert len(values) == count, out.getvalue()
+    assert all(meets(v) for v in values), out.getvalue()
+    if script.name == "grid_search.py":
+        assert max(values) > 0 and "best:" in out.getvalue()
 
 
 def test_ci_runs_the_readme_test_command():

@@ -10,6 +10,7 @@ import pytest
 
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.io import READ_FORMATS, read_cloud
+from o3d_rpointhop.transforms import rotation_error_deg
 
 laspy = pytest.importorskip("laspy")
 
@@ -128,14 +129,31 @@ def test_meshes_and_unknown_formats_are_checked(tmp_path):
 
 
 def test_read_points_register(tmp_path):
-    """A cloud read from LAS survey coordinates registers like the same points do."""
+    """Two LAS files at survey coordinates, the source a moved copy of the target: each
+    reads back as its own points (to the file's millimetre) and the pair registers to
+    the motion between them."""
+    from scipy.spatial.transform import Rotation
+
     from o3d_rpointhop import register
 
-    points = make_object(1200, shape_seed=4) * 10 + OFFSET
-    _las(tmp_path / "t.las", points)
-    cloud = read_cloud(tmp_path / "t.las")
-    result = register(cloud, cloud, global_method=None)
-    np.testing.assert_allclose(result.transformation, np.eye(4), atol=1e-6)
+    target = make_object(1200, shape_seed=4) * 10
+    motion = np.eye(4)
+    motion[:3, :3] = Rotation.from_euler("xyz", [4, -3, 6], degrees=True).as_matrix()
+    motion[:3, 3] = [0.3, -0.2, 0.1]
+    source = (target - motion[:3, 3]) @ motion[:3, :3]  # motion maps source onto target
+    _las(tmp_path / "s.las", source + OFFSET)
+    _las(tmp_path / "t.las", target + OFFSET)
+    read_source = np.asarray(read_cloud(tmp_path / "s.las").points)
+    read_target = np.asarray(read_cloud(tmp_path / "t.las").points)
+    np.testing.assert_allclose(read_source, source + OFFSET, atol=6e-4)
+    np.testing.assert_allclose(read_target, target + OFFSET, atol=6e-4)
+    result = register(read_source, read_target, global_method=None)
+    shift = np.eye(4)
+    shift[:3, 3] = OFFSET  # the motion in survey coordinates
+    truth = shift @ motion @ np.linalg.inv(shift)
+    assert rotation_error_deg(result.transformation, truth) < 0.1
+    moved = read_source @ result.transformation[:3, :3].T + result.transformation[:3, 3]
+    assert np.abs(moved - (target + OFFSET)).max() < 0.01
 
 
 def test_survey_scans_keep_their_colours_through_the_command_line(tmp_path, capsys):

@@ -9,6 +9,7 @@ shipped models), :mod:`._persistence` (the model file format) and the subpackage
 
 from ._base import BaseDescriptor
 from ._fpfh import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR, FPFHTransformer
+from ._persistence import content_hash
 from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS
 from ._rpointhop import RPointHopTransformer
 
@@ -20,4 +21,5 @@ __all__ = [
     "PRETRAINED_COMPONENTS",
     "PRETRAINED_MODELS",
     "RPointHopTransformer",
+    "content_hash",
 ]

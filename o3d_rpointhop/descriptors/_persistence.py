@@ -25,6 +25,7 @@ still load)::
 
 from __future__ import annotations
 
+import hashlib
 import json
 import numbers
 import zipfile
@@ -56,8 +57,9 @@ _STORED_PARAMS = (
 )
 
 
-def save_model(model: Any, path: str | PathLike) -> None:
-    """Write a fitted ``RPointHopTransformer`` to ``path`` (exactly that name)."""
+def _model_contents(model: Any) -> tuple[dict, dict]:
+    """A fitted ``RPointHopTransformer`` as a model file holds it: its metadata (without
+    the library version) and its arrays by entry name, in file order."""
     params = {}
     for name in _STORED_PARAMS:
         value = getattr(model, name)
@@ -71,7 +73,6 @@ def save_model(model: Any, path: str | PathLike) -> None:
     meta = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
-        "library_version": __version__,
         "params": params,
         "n_hops": len(model.kernels_),
         "n_features_out": int(model.selected_[-1].size),
@@ -86,7 +87,7 @@ def save_model(model: Any, path: str | PathLike) -> None:
     method = getattr(model, "registration_global_method_", None)
     if method is not None:
         meta["registration_global_method"] = str(method)
-    arrays = {"metadata": np.array(json.dumps(meta))}
+    arrays = {}
     for h in range(len(model.kernels_)):
         # float32: the transform applies kernels and means in float32 (the features'
         # precision), so a reloaded model describes exactly as the fitted one, from a
@@ -100,9 +101,31 @@ def save_model(model: Any, path: str | PathLike) -> None:
         arrays["pca_components"] = np.asarray(model.components_, dtype=np.float32)
         arrays["pca_variance"] = np.asarray(model.explained_variance_, dtype=np.float64)
         arrays["pca_mean"] = np.asarray(model.pca_mean_, dtype=np.float64)
+    return meta, arrays
+
+
+def save_model(model: Any, path: str | PathLike) -> None:
+    """Write a fitted ``RPointHopTransformer`` to ``path`` (exactly that name)."""
+    meta, arrays = _model_contents(model)
+    head = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "library_version": __version__}
+    meta = {**head, **meta}  # the file's key order: format, versions, then the rest
     # Through a file handle: exactly ``path`` (given a name, numpy would append .npz).
     with open(path, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
+        np.savez_compressed(fh, metadata=np.array(json.dumps(meta)), **arrays)
+
+
+def content_hash(model: Any) -> str:
+    """SHA-256 (hex) of what a fitted ``RPointHopTransformer`` describes with: its
+    stored parameters (``n_components`` among them), metadata and arrays as a model file
+    holds them, the library version left out. Equal for a model and its reloaded file,
+    different for the same file on another number of axes."""
+    meta, arrays = _model_contents(model)
+    digest = hashlib.sha256(json.dumps(meta, sort_keys=True).encode())
+    for name, array in arrays.items():
+        array = np.ascontiguousarray(array)
+        digest.update(f"\0{name}\0{array.dtype.str}\0{array.shape}\0".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 def _invalid(path, why: str) -> ValueError:

@@ -17,6 +17,7 @@ from ._common import (
     register_resolution,
 )
 from .methods import check_methods
+from .provenance import run_provenance
 from .records import as_rows
 
 __all__ = ["BUNNY_PROTOCOLS", "run_bunny"]
@@ -58,6 +59,7 @@ def run_bunny(
         "settings": {"seed": seed, **model_facts(model), **machine_facts()},
         "protocols": {},
     }
+    out["provenance"] = run_provenance(methods, model)
     rng = np.random.default_rng(seed)
 
     for protocol in protocols:

@@ -163,9 +163,14 @@ class Method:
         The datasets it can be run on.
     default_on : frozenset of str
         The datasets whose benchmark runs it when no method is named.
-    model : {"given", "scene", "loso", None}
+    model : {"given", "scene", "loso", "recipe", None}
         The R-PointHop model it describes with: the benchmark's (``"given"``), the
-        shipped scene model, each pair's leave-one-scene-out model, or none (FPFH, ICP).
+        shipped scene model, each pair's leave-one-scene-out model, the Open3D recipe's
+        32-axis model (:func:`open3d_recipe_descriptor`), or none.
+    descriptor : {"rpointhop", "fpfh", "open3d-fpfh", "kiss-matcher", "none"}
+        What describes the points: R-PointHop (``model`` says which), this library's
+        ``FPFHTransformer``, Open3D's FPFH as its tutorial computes it, KISS-Matcher's
+        own, or nothing (ICP alone). Records name it (:mod:`.provenance`).
     open3d_only : bool
         Open3D calls from end to end (a recipe).
     """
@@ -177,6 +182,7 @@ class Method:
     default_on: frozenset = frozenset()
     model: str | None = "given"
     open3d_only: bool = False
+    descriptor: str = "rpointhop"
 
 
 #: Up in a camera's frame (image rows grow downwards): the up-axis prior of the 3DMatch
@@ -205,6 +211,7 @@ def _register_with(**options):
         result = register(source, target, descriptor, seed=seed, viewpoints=viewpoints, **options)
         return _claimed(result)
 
+    run.options = options  # what the records name (provenance)
     return run
 
 
@@ -236,6 +243,7 @@ def _fpfh_pipeline(**options):
         )
         return _claimed(result)
 
+    run.options = options
     return run
 
 
@@ -367,6 +375,7 @@ METHODS = _methods(
         default_on=_OBJECTS,
         model=None,
         open3d_only=True,
+        descriptor="open3d-fpfh",
     ),
     Method(
         "fpfh-fgr",
@@ -375,6 +384,7 @@ METHODS = _methods(
         default_on=_OBJECTS,
         model=None,
         open3d_only=True,
+        descriptor="open3d-fpfh",
     ),
     Method(
         "fpfh-ransac-icp",
@@ -383,6 +393,7 @@ METHODS = _methods(
         default_on=_ALL,
         model=None,
         open3d_only=True,
+        descriptor="open3d-fpfh",
     ),
     Method(
         "fpfh-ransac-icp-5cm",
@@ -391,6 +402,7 @@ METHODS = _methods(
         default_on=_SCENES,
         model=None,
         open3d_only=True,
+        descriptor="open3d-fpfh",
     ),
     Method(
         "fpfh-pipeline-ransac-icp",
@@ -398,6 +410,7 @@ METHODS = _methods(
         _fpfh_pipeline(global_method="ransac"),
         default_on=_ALL,
         model=None,
+        descriptor="fpfh",
     ),
     Method(
         "fpfh-pipeline-consensus-icp",
@@ -405,6 +418,7 @@ METHODS = _methods(
         _fpfh_pipeline(global_method="consensus"),
         default_on=_ALL,
         model=None,
+        descriptor="fpfh",
     ),
     Method(
         "fpfh-pipeline-consensus-icp-4096",
@@ -412,6 +426,7 @@ METHODS = _methods(
         _fpfh_pipeline(global_method="consensus", n_global_points=4096),
         datasets=_SCENES,
         model=None,
+        descriptor="fpfh",
     ),
     Method(
         "fpfh-sc2pcr-icp",
@@ -420,6 +435,7 @@ METHODS = _methods(
         datasets=_SCENES,
         default_on=_SCENES,
         model=None,
+        descriptor="fpfh",
     ),
     Method(
         "fpfh-pipeline-consensus-icp-up",
@@ -427,13 +443,14 @@ METHODS = _methods(
         _fpfh_pipeline(global_method="consensus", up=CAMERA_UP),
         datasets=_SCENES,
         model=None,
+        descriptor="fpfh",
     ),
     Method(
         "rpointhop-open3d-ransac-icp",
         "R-PointHop (32 axes) in Open3D's RANSAC recipe + point-to-plane ICP",
         _run_rpointhop_open3d,
         default_on=_OBJECTS,
-        model=None,
+        model="recipe",
         open3d_only=True,
     ),
     Method(
@@ -442,6 +459,7 @@ METHODS = _methods(
         _run_kiss_matcher,
         default_on=_SCENES,
         model=None,
+        descriptor="kiss-matcher",
     ),
     Method(
         "icp",
@@ -450,6 +468,7 @@ METHODS = _methods(
         default_on=_OBJECTS,
         model=None,
         open3d_only=True,
+        descriptor="none",
     ),
 )
 
@@ -582,7 +601,7 @@ def run_method(
     # Reading a model file is not part of a method's time: read it now, once per process.
     if method.model == "scene":
         descriptor = shipped_scene_model()
-    if name == "rpointhop-open3d-ransac-icp":
+    if method.model == "recipe":
         open3d_recipe_descriptor()
     # Flagged results are scored like any other; the flags' warnings would only repeat.
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says

@@ -17,6 +17,7 @@ from ._common import (
 )
 from .methods import check_methods
 from .protocols import PROTOCOLS, make_pairs
+from .provenance import model_identity, run_provenance
 from .records import as_rows
 
 __all__ = ["MODELNET40_PROTOCOLS", "ANGLE_SWEEP", "run_modelnet40"]
@@ -84,6 +85,7 @@ def run_modelnet40(
         },
         "protocols": {},
     }
+    out["provenance"] = run_provenance(methods, model)
     for protocol in protocols:
         shapes, protocol_model = test.points, model
         fit_seconds = None
@@ -126,4 +128,6 @@ def run_modelnet40(
         if fit_seconds is not None:
             out["protocols"][protocol]["fit_seconds"] = fit_seconds
             out["protocols"][protocol]["fit_shapes"] = int(len(seen))
+            # The given model's methods describe with a model fitted here instead.
+            out["protocols"][protocol]["model"] = model_identity(protocol_model)
     return out

@@ -27,6 +27,7 @@ from ..registration.prepared import common_voxel
 from ..registration.result import MultiwayResult
 from ..transforms import apply_transform, rotation_error_deg
 from .methods import feature_ransac, fpfh_recipe_cloud
+from .provenance import multiway_provenance
 from .records import ScanRecord
 from .registry import entries
 
@@ -132,6 +133,7 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
         "dataset": "multiway",
         "settings": {"seed": seed, "tolerance": TOLERANCE, "n_jobs": n_jobs},
         "objects": {},
+        "provenance": multiway_provenance(descriptors),
     }
     moved_scans = {}
     for name in objects:

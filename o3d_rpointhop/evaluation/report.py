@@ -105,9 +105,12 @@ def markdown(results: dict) -> str:
         )
     if "model_file_bytes" in settings:
         lines.append(
-            f"R-PointHop model: {settings['model_n_features_out']}-D descriptors, "
+            f"The benchmark's own R-PointHop model: "
+            f"{settings['model_n_features_out']}-D descriptors, "
             f"{settings['model_file_bytes']:,} bytes on disk."
         )
+    if "provenance" in results:
+        lines += ["", *_provenance_table(results["provenance"])]
     for name, protocol in results["protocols"].items():
         lines += ["", f"## {name}", ""]
         if "description" in protocol:
@@ -149,6 +152,37 @@ def markdown(results: dict) -> str:
         if "paired" in protocol:
             lines += ["", *_paired_table(protocol["paired"])]
     return "\n".join(lines) + "\n"
+
+
+def _descriptor_cell(descriptor: dict) -> str:
+    if "per_scene" in descriptor:
+        return "R-PointHop, one model fitted per held-out scene: " + ", ".join(
+            f"{scene} {entry['sha256'][:12]}" for scene, entry in descriptor["per_scene"].items()
+        )
+    if descriptor.get("sha256"):
+        return (
+            f"{descriptor['class']}, model {descriptor['model']} "
+            f"({descriptor['n_features_out']}-D, sha256 {descriptor['sha256'][:12]})"
+        )
+    return str(descriptor.get("class"))
+
+
+def _provenance_table(provenance: dict) -> list[str]:
+    """What produced the results: the library, its commit, and each method's descriptor."""
+    commit = provenance["commit"]
+    state = "unknown commit" if commit["id"] is None else f"commit {commit['id'][:12]}"
+    if commit.get("modified"):
+        state += " with local changes"
+    lines = [
+        f"Made by o3d-rpointhop {provenance['o3d_rpointhop']} ({state}), thread budget "
+        f"{provenance['threads']}. Descriptors (full parameters in the JSON file):",
+        "",
+        "| method | descriptor |",
+        "|---|---|",
+    ]
+    for name, entry in provenance["methods"].items():
+        lines.append(f"| {name} | {_descriptor_cell(entry['descriptor'])} |")
+    return lines
 
 
 def _diagnostics_table(diagnostics: dict) -> list[str]:

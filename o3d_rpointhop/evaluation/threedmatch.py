@@ -15,6 +15,7 @@ from ._common import Progress, machine_facts, model_facts
 from .diagnostics import pair_diagnostics
 from .methods import METHODS, check_methods, run_method, shipped_scene_model
 from .metrics import mcnemar, rmse_3dmatch
+from .provenance import run_provenance
 from .records import ScenePairRecord, as_rows
 from .scene_models import leave_one_scene_out
 
@@ -152,6 +153,8 @@ def run_3dmatch(
             "fragments_per_model": {s: int(m.n_training_clouds_) for s, m in loso.items()},
             "fit_seconds": time.perf_counter() - start,
         }
+
+    out["provenance"] = run_provenance(methods, model, loso)
 
     def descriptor_of(method: str, pair):
         kind = METHODS[method].model

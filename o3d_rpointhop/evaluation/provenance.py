@@ -1,0 +1,231 @@
+"""What produced a benchmark result: the library, its commit, the thread budget, and for
+every method its descriptor (class, model name, content hash, parameters) and options.
+
+Every runner writes :func:`run_provenance` into its result under ``"provenance"``;
+:func:`read_results` refuses a result file without it, so a table cannot be rebuilt
+from numbers that do not say what made them.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from ..descriptors import (
+    FEATURE_RADIUS_FACTOR,
+    NORMAL_RADIUS_FACTOR,
+    PRETRAINED_MODELS,
+    FPFHTransformer,
+    RPointHopTransformer,
+    content_hash,
+)
+from .methods import METHODS, current_thread_budget, open3d_recipe_descriptor, shipped_scene_model
+
+__all__ = [
+    "REQUIRED",
+    "check_provenance",
+    "model_identity",
+    "multiway_provenance",
+    "read_results",
+    "run_provenance",
+]
+
+#: The keys every result's ``"provenance"`` holds.
+REQUIRED = ("o3d_rpointhop", "commit", "open3d", "numpy", "python", "threads", "methods")
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return repr(value)
+
+
+def _shipped_name(model: RPointHopTransformer, digest: str) -> str | None:
+    """The shipped model ``model`` is (on its number of axes), or None."""
+    for name in PRETRAINED_MODELS:
+        try:
+            shipped = RPointHopTransformer.pretrained(name, n_components=model.n_components)
+        except ValueError:  # more axes than that file holds
+            continue
+        if content_hash(shipped) == digest:
+            return name
+    return None
+
+
+def model_identity(model: RPointHopTransformer) -> dict:
+    """A fitted R-PointHop model as a record names it: class, shipped name (or
+    ``"fitted"``), content hash (:func:`~o3d_rpointhop.descriptors.content_hash`),
+    descriptor size and parameters."""
+    digest = content_hash(model)
+    out = {
+        "class": "o3d_rpointhop.RPointHopTransformer",
+        "model": _shipped_name(model, digest) or "fitted",
+        "sha256": digest,
+        "n_features_out": int(model.n_features_out_),
+        "params": _json_safe(model.get_params()),
+    }
+    scenes = getattr(model, "training_scenes_", None)
+    if scenes:
+        out["training_scenes"] = sorted(scenes)
+    return out
+
+
+def _open3d_fpfh() -> dict:
+    return {
+        "class": "open3d.pipelines.registration.compute_fpfh_feature",
+        "params": "normals: radius 2 voxels, 30 neighbours; features: radius 5 voxels, "
+        "100 neighbours (Open3D's global registration tutorial)",
+    }
+
+
+def _library_fpfh() -> dict:
+    return {
+        "class": "o3d_rpointhop.FPFHTransformer",
+        "params": _json_safe(FPFHTransformer().get_params()),
+        "radius_factors": {"normals": NORMAL_RADIUS_FACTOR, "features": FEATURE_RADIUS_FACTOR},
+    }
+
+
+def _kiss_matcher() -> dict:
+    try:
+        version = metadata.version("kiss-matcher")
+    except metadata.PackageNotFoundError:
+        version = None
+    return {"class": "kiss_matcher.KISSMatcher (Faster-PFH)", "version": version}
+
+
+#: The non-R-PointHop descriptors, by :attr:`~.methods.Method.descriptor`.
+_FEATURES = {
+    "open3d-fpfh": _open3d_fpfh,
+    "fpfh": _library_fpfh,
+    "kiss-matcher": _kiss_matcher,
+    "none": lambda: {"class": None},
+}
+
+
+def _method_entry(name: str, given: RPointHopTransformer, loso: dict) -> dict:
+    method = METHODS[name]
+    entry: dict = {"description": method.description}
+    options = getattr(method.run, "options", None)
+    if options is not None:
+        entry["options"] = _json_safe(
+            {k: getattr(v, "__name__", v) if callable(v) else v for k, v in options.items()}
+        )
+    if method.model == "given":
+        entry["descriptor"] = model_identity(given)
+    elif method.model == "scene":
+        entry["descriptor"] = model_identity(shipped_scene_model())
+    elif method.model == "recipe":
+        entry["descriptor"] = model_identity(open3d_recipe_descriptor())
+    elif method.model == "loso":
+        entry["descriptor"] = {
+            "per_scene": {scene: model_identity(m) for scene, m in sorted(loso.items())}
+        }
+    else:
+        entry["descriptor"] = _FEATURES[method.descriptor]()
+    return entry
+
+
+def _commit() -> dict:
+    """The checkout's commit and whether the package's files differ from it (None
+    outside a git checkout)."""
+    root = Path(__file__).resolve().parents[2]
+    if not (root / ".git").exists():
+        return {"id": None, "modified": None}
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=30,
+        ).stdout.strip()
+        changed = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--", "o3d_rpointhop"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=30,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return {"id": None, "modified": None}
+    return {"id": head, "modified": bool(changed)}
+
+
+def run_provenance(methods, model: RPointHopTransformer, loso: dict | None = None) -> dict:
+    """The provenance of a run of ``methods`` with the benchmark's ``model`` (and the
+    leave-one-scene-out models by scene, when a method uses them)."""
+    import open3d
+
+    from .._version import __version__
+
+    return {
+        "o3d_rpointhop": __version__,
+        "commit": _commit(),
+        "open3d": open3d.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "threads": current_thread_budget(),
+        "methods": {name: _method_entry(name, model, loso or {}) for name in methods},
+    }
+
+
+def multiway_provenance(methods) -> dict:
+    """:func:`run_provenance` for the scan-set benchmark's methods (``rpointhop``:
+    ``register_multiway``'s default model; ``fpfh``: this library's FPFH;
+    ``open3d-recipe``: Open3D's tutorial FPFH)."""
+    from ..registration.defaults import default_descriptor
+
+    out = run_provenance([], default_descriptor())
+    kinds = {
+        "rpointhop": lambda: model_identity(default_descriptor()),
+        "fpfh": _library_fpfh,
+        "open3d-recipe": _open3d_fpfh,
+    }
+    out["methods"] = {name: {"descriptor": kinds[name]()} for name in methods}
+    return out
+
+
+def _methods_of(results: dict) -> set[str]:
+    """Every method a result holds records of."""
+    names: set[str] = set()
+    for protocol in results.get("protocols", {}).values():
+        names |= set(protocol.get("records", {}))
+    for entry in results.get("objects", {}).values():
+        names |= set(entry.get("methods", {}))
+    return names
+
+
+def check_provenance(results: dict, where: str = "result") -> None:
+    """Raise ValueError unless ``results`` names what produced every method in it."""
+    found = results.get("provenance") if isinstance(results, dict) else None
+    if not isinstance(found, dict):
+        raise ValueError(f"{where} records no provenance: it cannot say what produced it")
+    missing = [key for key in REQUIRED if key not in found]
+    if missing:
+        raise ValueError(f"{where}: its provenance lacks {missing}")
+    unnamed = sorted(_methods_of(results) - set(found["methods"]))
+    if unnamed:
+        raise ValueError(f"{where}: its provenance does not name the methods {unnamed}")
+    for name, entry in found["methods"].items():
+        if "descriptor" not in entry:
+            raise ValueError(f"{where}: method {name!r} names no descriptor")
+
+
+def read_results(path) -> dict:
+    """A result file written by a benchmark, refused (ValueError) without provenance."""
+    path = Path(path)
+    results = json.loads(path.read_text())
+    check_provenance(results, str(path))
+    return results
