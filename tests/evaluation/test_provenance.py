@@ -108,7 +108,6 @@ WITHOUT_PROVENANCE = frozenset(
         "3dmatch_heldout_timing_sample.json",
         "3dmatch_heldout_timing_sample_all.json",
         "3dmatch_training_gate.json",
-        "bunny.json",
         "descriptor_quality.json",
         "modelnet40.json",
         "modelnet40_timing_sample.json",
