@@ -160,3 +160,12 @@ def partial_views(n_scans: int, seed: int = 0, n_points: int = 2400):
         scans.append(apply_transform(view, motion))
         poses.append(np.linalg.inv(motion))  # back into the object's (= scan 0's) frame
     return scans, poses
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now (for the viewer's server)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

@@ -9,7 +9,6 @@ from numbers that do not say what made them.
 from __future__ import annotations
 
 import json
-import platform
 import subprocess
 from importlib import metadata
 from pathlib import Path
@@ -24,7 +23,8 @@ from ..descriptors import (
     RPointHopTransformer,
     content_hash,
 )
-from .methods import METHODS, current_thread_budget, open3d_recipe_descriptor, shipped_scene_model
+from ._common import machine_facts
+from .methods import METHODS, open3d_recipe_descriptor, shipped_scene_model
 
 __all__ = [
     "REQUIRED",
@@ -114,7 +114,8 @@ _FEATURES = {
 }
 
 
-def _method_entry(name: str, given: RPointHopTransformer, loso: dict) -> dict:
+def _method_entry(name: str, given: RPointHopTransformer, loso: dict, identity) -> dict:
+    """One method's entry; ``identity`` is :func:`model_identity`, memoised per run."""
     method = METHODS[name]
     entry: dict = {"description": method.description}
     options = getattr(method.run, "options", None)
@@ -123,14 +124,14 @@ def _method_entry(name: str, given: RPointHopTransformer, loso: dict) -> dict:
             {k: getattr(v, "__name__", v) if callable(v) else v for k, v in options.items()}
         )
     if method.model == "given":
-        entry["descriptor"] = model_identity(given)
+        entry["descriptor"] = identity(given)
     elif method.model == "scene":
-        entry["descriptor"] = model_identity(shipped_scene_model())
+        entry["descriptor"] = identity(shipped_scene_model())
     elif method.model == "recipe":
-        entry["descriptor"] = model_identity(open3d_recipe_descriptor())
+        entry["descriptor"] = identity(open3d_recipe_descriptor())
     elif method.model == "loso":
         entry["descriptor"] = {
-            "per_scene": {scene: model_identity(m) for scene, m in sorted(loso.items())}
+            "per_scene": {scene: identity(m) for scene, m in sorted(loso.items())}
         }
     else:
         entry["descriptor"] = _FEATURES[method.descriptor]()
@@ -163,21 +164,40 @@ def _commit() -> dict:
     return {"id": head, "modified": bool(changed)}
 
 
+def _run_facts() -> dict:
+    """What every provenance holds besides its methods: the library versions
+    (:func:`~._common.machine_facts`'s), the commit and the thread budget."""
+    facts = machine_facts()
+    return {
+        "o3d_rpointhop": facts["o3d_rpointhop"],
+        "commit": _commit(),
+        "open3d": facts["open3d"],
+        "numpy": facts["numpy"],
+        "python": facts["python"],
+        "threads": facts["thread_budget"],
+    }
+
+
+def _memoised_identity():
+    """:func:`model_identity` computed once per model object (one run's models). The
+    memo holds the models too, so that no id is reused by another model meanwhile."""
+    seen: dict[int, tuple[RPointHopTransformer, dict]] = {}
+
+    def identity(model: RPointHopTransformer) -> dict:
+        if id(model) not in seen:
+            seen[id(model)] = (model, model_identity(model))
+        return seen[id(model)][1]
+
+    return identity
+
+
 def run_provenance(methods, model: RPointHopTransformer, loso: dict | None = None) -> dict:
     """The provenance of a run of ``methods`` with the benchmark's ``model`` (and the
     leave-one-scene-out models by scene, when a method uses them)."""
-    import open3d
-
-    from .._version import __version__
-
+    identity = _memoised_identity()
     return {
-        "o3d_rpointhop": __version__,
-        "commit": _commit(),
-        "open3d": open3d.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "threads": current_thread_budget(),
-        "methods": {name: _method_entry(name, model, loso or {}) for name in methods},
+        **_run_facts(),
+        "methods": {name: _method_entry(name, model, loso or {}, identity) for name in methods},
     }
 
 
@@ -187,14 +207,12 @@ def multiway_provenance(methods) -> dict:
     ``open3d-recipe``: Open3D's tutorial FPFH)."""
     from ..registration.defaults import default_descriptor
 
-    out = run_provenance([], default_descriptor())
     kinds = {
         "rpointhop": lambda: model_identity(default_descriptor()),
-        "fpfh": _library_fpfh,
-        "open3d-recipe": _open3d_fpfh,
+        "fpfh": _FEATURES["fpfh"],
+        "open3d-recipe": _FEATURES["open3d-fpfh"],
     }
-    out["methods"] = {name: {"descriptor": kinds[name]()} for name in methods}
-    return out
+    return {**_run_facts(), "methods": {name: {"descriptor": kinds[name]()} for name in methods}}
 
 
 def _methods_of(results: dict) -> set[str]:

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import io
 import shutil
-import socket
 
 import numpy as np
 import pytest
-from helpers import random_motion
+from helpers import free_port, random_motion
 
 from o3d_rpointhop import register, register_multiway
 from o3d_rpointhop.datasets import make_object
@@ -34,12 +33,6 @@ FLAGS = [
     "--disable-sync",
     "--no-first-run",
 ]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +64,7 @@ def test_a_pair_registration_is_drawn_with_its_panel_and_toggles(browser):
     rot, shift = random_motion(1, 0.3)
     source = make_object(3000, shape_seed=4, sample_seed=2) @ rot.T + shift
     result = register(source, target)
-    server = show_registration(source, target, result, port=_free_port(), block=False)
+    server = show_registration(source, target, result, port=free_port(), block=False)
     try:
         page = _open(browser, server)
         for label in (
@@ -103,7 +96,7 @@ def test_a_reconstruction_is_drawn_scan_by_scan(browser):
 
     scans, _ = partial_views(3, seed=1)
     result = register_multiway(scans, seed=0)
-    server = show_multiway(scans, result, port=_free_port(), block=False)
+    server = show_multiway(scans, result, port=free_port(), block=False)
     try:
         page = _open(browser, server)
         for label in (

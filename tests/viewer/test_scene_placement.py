@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import partial_views, random_motion
+from helpers import free_port, partial_views, random_motion
 from scipy.spatial import cKDTree
 
 from o3d_rpointhop import register, register_multiway
 from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.transforms import apply_transform
 
 viser = pytest.importorskip("viser")
 
@@ -31,18 +32,6 @@ def drawn(monkeypatch):
     return clouds
 
 
-def _port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _apply(points, matrix):
-    return points @ matrix[:3, :3].T + matrix[:3, 3]
-
-
 def test_the_aligned_source_is_drawn_where_the_transformation_sends_it(drawn):
     from o3d_rpointhop.viewer import show_registration
 
@@ -50,11 +39,11 @@ def test_the_aligned_source_is_drawn_where_the_transformation_sends_it(drawn):
     rot, shift = random_motion(1, 0.3)
     source = make_object(2000, shape_seed=4, sample_seed=2) @ rot.T + shift
     result = register(source, target)
-    server = show_registration(source, target, result, port=_port(), block=False)
+    server = show_registration(source, target, result, port=free_port(), block=False)
     server.stop()
     # The scene is drawn about some origin: compare offsets from the drawn target's mean.
     offset = target.mean(axis=0) - drawn["/target"].mean(axis=0)
-    expected = _apply(source, result.transformation)
+    expected = apply_transform(source, result.transformation)
     gap, _ = cKDTree(expected).query(drawn["/aligned"] + offset)
     assert gap.max() < 1e-3  # float32 on screen
     gap, _ = cKDTree(source).query(drawn["/source"] + offset)
@@ -69,13 +58,13 @@ def test_each_scan_is_drawn_where_its_pose_sends_it(drawn):
 
     scans, _ = partial_views(3, seed=1)
     result = register_multiway(scans, seed=0)
-    server = show_multiway(scans, result, port=_port(), block=False)
+    server = show_multiway(scans, result, port=free_port(), block=False)
     server.stop()
     placed = [k for k, pose in enumerate(result.poses) if pose is not None]
     assert placed == [0, 1, 2]
-    first = _apply(scans[0], result.poses[0])
+    first = apply_transform(scans[0], result.poses[0])
     offset = first.mean(axis=0) - drawn["/scan_0"].mean(axis=0)
     for k in placed:
-        expected = _apply(scans[k], result.poses[k])
+        expected = apply_transform(scans[k], result.poses[k])
         gap, _ = cKDTree(expected).query(drawn[f"/scan_{k}"] + offset)
         assert gap.max() < 1e-4, k
