@@ -5,16 +5,18 @@ The tutorial's flow (``preprocess_point_cloud``, ``execute_global_registration``
 voxels, at most 100 neighbours), Open3D's RANSAC on mutual feature matches (1.5 voxels,
 the edge-length and distance checkers, 100,000 iterations at 0.999 confidence), then
 point-to-plane ICP at 0.4 voxels on the full clouds. The R-PointHop flow changes one
-line: the features are ``to_open3d_feature(model.transform(pcd_down))`` with
-``RPointHopTransformer.pretrained(n_components=K)``. Both flows are timed whole, from
-the raw clouds to the refined transformation, interleaved pair by pair.
+line: the features are ``to_open3d_feature(model.transform(pcd_down))`` with a shipped
+model: ``rpointhop-K``, the paper's four-hop model on K principal axes
+(``RPointHopTransformer.pretrained(n_components=K)``), or ``object``, the one-hop object
+model's whole 24-D descriptor (``pretrained("object")``). Both flows are timed whole,
+from the raw clouds to the refined transformation, interleaved pair by pair.
 
 Pairs (seeded; the ground truth known):
 
 * ``choose``: ModelNet40 *training* shapes (two samples of each surface, one turned
   over SO(3)), voxel 0.05 (the benchmarks' recipe voxel for unit objects): where the
-  descriptor length ``K`` is chosen, as the fastest flow that places as many runs as
-  FPFH's on one thread (``recommended`` in the results);
+  features are chosen, as the fastest flow that places as many runs as FPFH's on one
+  thread (``recommended`` in the results);
 * ``bunny-neighbours``: the Stanford Bunny's ring scans 45 degrees apart (bun045 to
   bun000, bun090 to bun045, bun315 to bun000, bun270 to bun315), and ``bunny``: every
   scan to bun000; ground truth from ``bun.conf``, each source moved by a random rigid
@@ -25,8 +27,8 @@ Thread budgets: ``one`` (Open3D and the descriptor on one thread each) and ``all
 (every core each; Open3D's RANSAC then draws in an order set by its threads, so a pair
 may land differently from run to run).
 
-Usage: python benchmarks/open3d_tutorial.py [--data PATH] [--components 16 32 64]
-       [--output benchmarks/results]
+Usage: python benchmarks/open3d_tutorial.py [--data PATH]
+       [--features object rpointhop-16 rpointhop-32] [--output benchmarks/results]
 Writes open3d_tutorial.json and open3d_tutorial.md.
 """
 
@@ -161,16 +163,24 @@ def bunny_pairs(data, seed=31):
     return _scan_pairs(data, [(n, "bun000") for n in BUNNY_SCANS if n != "bun000"], seed)
 
 
-def run(pairs, tol, components, budget, repeats=3):
+def feature_model(name: str) -> RPointHopTransformer:
+    """The model a feature name stands for: ``object`` or ``rpointhop-K``."""
+    if name == "object":
+        return RPointHopTransformer.pretrained("object")
+    prefix, _, axes = name.partition("-")
+    if prefix != "rpointhop" or not axes.isdigit():
+        raise ValueError(f"features are 'object' or 'rpointhop-K', got {name!r}")
+    return RPointHopTransformer.pretrained(n_components=int(axes))
+
+
+def run(pairs, tol, features, budget, repeats=3):
     """Every flow on every pair, ``repeats`` times interleaved; medians per pair."""
     threads = 1 if budget == "one" else o3d.utility.get_max_threads()
     previous = o3d.utility.get_max_threads()
     o3d.utility.set_max_threads(threads)
     models = {
-        f"rpointhop-{k}": RPointHopTransformer.pretrained(n_components=k).set_params(
-            n_jobs=1 if budget == "one" else None
-        )
-        for k in components
+        name: feature_model(name).set_params(n_jobs=1 if budget == "one" else None)
+        for name in features
     }
     flows = {"fpfh": None, **models}
     rows = {name: [] for name in flows}
@@ -216,25 +226,23 @@ def summary(rows):
     return out
 
 
-def recommend(summary) -> int:
-    """The descriptor length whose flow is fastest among those that place as many runs
-    as FPFH's (the shortest that places the most, if none does)."""
+def recommend(summary) -> str:
+    """The features whose flow is fastest among those that place as many runs as
+    FPFH's (the fastest of those that place the most, if none does)."""
     fpfh = summary["fpfh"]["placed"]
-    ours = {int(n.split("-")[1]): s for n, s in summary.items() if n != "fpfh"}
-    good = [k for k, s in ours.items() if s["placed"] >= fpfh]
+    ours = {n: s for n, s in summary.items() if n != "fpfh"}
+    good = [n for n, s in ours.items() if s["placed"] >= fpfh]
     if not good:
         best = max(s["placed"] for s in ours.values())
-        return min(k for k, s in ours.items() if s["placed"] == best)
-    return min(good, key=lambda k: ours[k]["median_seconds"])
+        good = [n for n, s in ours.items() if s["placed"] == best]
+    return min(good, key=lambda n: ours[n]["median_seconds"])
 
 
 def markdown(results):
     lines = ["# Open3D's global registration tutorial: FPFH and R-PointHop features", ""]
     lines.append(f"Machine: {results['machine']['machine']}.")
     if "recommended" in results:
-        lines.append(
-            f"Descriptor length chosen on the training pairs: {results['recommended']} axes."
-        )
+        lines.append(f"Features chosen on the training pairs: {results['recommended']}.")
     lines.append("")
     lines += [
         "| pairs | thread budget | features | flow s per pair (median) | ratio to FPFH | "
@@ -255,7 +263,7 @@ def markdown(results):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=None)
-    parser.add_argument("--components", type=int, nargs="+", default=[16, 32, 64])
+    parser.add_argument("--features", nargs="+", default=["object", "rpointhop-16", "rpointhop-32"])
     parser.add_argument("--sets", nargs="+", default=["choose", "bunny-neighbours", "bunny"])
     parser.add_argument("--budgets", nargs="+", default=["one", "all"])
     parser.add_argument("--repeats", type=int, default=3)
@@ -267,7 +275,7 @@ def main(argv=None) -> int:
         for name in args.sets:
             pairs, tol = makers[name](args.data)
             for budget in args.budgets:
-                rows = run(pairs, tol, args.components, budget, args.repeats)
+                rows = run(pairs, tol, args.features, budget, args.repeats)
                 key = f"{name}/{budget}"
                 results["runs"][key] = {
                     "voxels": [p[4] for p in pairs],

@@ -72,6 +72,7 @@ def cases(data=None):
     from o3d_rpointhop.batch import register_many
 
     default = RPointHopTransformer.pretrained(n_components=128)
+    objects = RPointHopTransformer.pretrained("object")
     scene = RPointHopTransformer.pretrained("scene")
     fpfh = FPFHTransformer()
     pairs = _object_pairs() + [_room_pair()]
@@ -80,7 +81,12 @@ def cases(data=None):
     out = []
     full = RPointHopTransformer.pretrained(n_components=None)
     for name, source, _ in pairs[:1] + pairs[3:4]:
-        for descriptor_name, descriptor in (("full", full), ("scene", scene), ("fpfh", fpfh)):
+        for descriptor_name, descriptor in (
+            ("full", full),
+            ("object", objects),
+            ("scene", scene),
+            ("fpfh", fpfh),
+        ):
 
             def describe(s=source, d=descriptor):
                 return _digest(d.transform(s))
@@ -126,6 +132,11 @@ def cases(data=None):
                 )
 
             out.append((f"{name} rpointhop ransac+{refine}", run))
+
+        def run_object(s=source, t=target):
+            return _result_digest(register(s, t, objects, global_method="ransac", seed=0))
+
+        out.append((f"{name} object-model ransac+point_to_plane", run_object))
 
         def run_scene(s=source, t=target):
             return _result_digest(register(s, t, scene, global_method="ransac", seed=0))

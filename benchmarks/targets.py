@@ -70,12 +70,20 @@ def _label(n: int) -> str:
     return f"{n // 1000}k" if n < 10**6 else f"{n // 10**6}M"
 
 
+#: The descriptors the describing targets are reported for: scaling.py's method name
+#: and the words of the row.
+DESCRIBED = (
+    ("rpointhop-object", "the object model (register()'s, 24-D)"),
+    ("rpointhop-128", "the paper's model on 128 axes"),
+)
+
+
 def describing_rows() -> list[tuple[str, str, str]]:
     scaling = _load("scaling.json")
     if scaling is None:
         return []
     rows = []
-    for budget, words, _ in BUDGETS:
+    for (budget, words, _), (method, described) in itertools.product(BUDGETS, DESCRIBED):
         seconds = {
             (r["method"], r["points"]): r["seconds"]
             for r in scaling["rows"]
@@ -83,9 +91,9 @@ def describing_rows() -> list[tuple[str, str, str]]:
         }
         sizes = sorted({p for _, p in seconds})
         axes = [
-            (n, seconds[("rpointhop-128", n)] / seconds[("fpfh", n)])
+            (n, seconds[(method, n)] / seconds[("fpfh", n)])
             for n in sizes
-            if ("rpointhop-128", n) in seconds and ("fpfh", n) in seconds
+            if (method, n) in seconds and ("fpfh", n) in seconds
         ]
         if not axes:
             continue
@@ -107,8 +115,8 @@ def describing_rows() -> list[tuple[str, str, str]]:
         )
         rows.append(
             (
-                "describing, 128 axes, at most 0.7x Open3D normals + FPFH at 2k and 20k "
-                f"points, 0.5x from 200k ({words})",
+                f"describing, {described}, at most 0.7x Open3D normals + FPFH at 2k and "
+                f"20k points, 0.5x from 200k ({words})",
                 " / ".join(f"{r:.2f}x" for _, r in axes)
                 + f" at {' / '.join(_label(n) for n, _ in axes)}",
                 verdict,
@@ -119,15 +127,15 @@ def describing_rows() -> list[tuple[str, str, str]]:
         for r in scaling["rows"]
         if r["points"] == 10**6 and r.get("budget", "all") == "all"
     }
-    if "rpointhop-128" in peaks:
-        peak = peaks["rpointhop-128"]
-        rows.append(
-            (
-                "1M points within 2 GiB (128 axes, every core)",
-                f"{peak:.0f} MiB",
-                _verdict([peak], 2048),
+    for method, described in DESCRIBED:
+        if method in peaks:
+            rows.append(
+                (
+                    f"1M points within 2 GiB ({described}, every core)",
+                    f"{peaks[method]:.0f} MiB",
+                    _verdict([peaks[method]], 2048),
+                )
             )
-        )
     return rows
 
 
@@ -215,15 +223,15 @@ def register_rows() -> list[tuple[str, str, str]]:
             if run is None:
                 continue
             summary = run["summary"]
-            name = f"rpointhop-{tutorial.get('recommended', 32)}"
+            name = tutorial.get("recommended", "object")
             if name not in summary:
                 continue
             ours, fpfh = summary[name], summary["fpfh"]
             every = ours["placed"] == ours["runs"]
             rows.append(
                 (
-                    "Open3D's tutorial with R-PointHop features at most 1.0x FPFH's flow, "
-                    f"every pair placed ({what}, {words})",
+                    f"Open3D's tutorial with R-PointHop features ({name}) at most 1.0x FPFH's "
+                    f"flow, every pair placed ({what}, {words})",
                     f"{ours['ratio_to_fpfh']:.2f}x; placed {ours['placed']} / {ours['runs']} "
                     f"runs (FPFH {fpfh['placed']} / {fpfh['runs']})",
                     "met" if ours["ratio_to_fpfh"] <= 1.0 and every else "missed",

@@ -9,7 +9,7 @@ import sys
 PROG = "o3d-rpointhop"
 #: The shipped models' names (``descriptors.PRETRAINED_MODELS``, written out so that
 #: building the parser loads no library; a test keeps the two equal).
-SHIPPED_MODELS = ("modelnet40", "scene")
+SHIPPED_MODELS = ("modelnet40", "object", "scene")
 
 #: Exit statuses (listed in ``--help``).
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_UNRELIABLE = 0, 1, 2, 3
@@ -178,7 +178,7 @@ def add_json(parser: argparse.ArgumentParser) -> None:
 
 # --------------------------------------------------------------------------- inputs
 def load_model(name: str | None, n_components: int | None = None):
-    """A model file, a shipped model by name, else the pretrained ModelNet40 model; on
+    """A model file, a shipped model by name, else the paper's ModelNet40 model; on
     ``n_components`` axes when given (a shipped model otherwise comes as
     ``pretrained(name)`` gives it)."""
     from ..descriptors import RPointHopTransformer
@@ -203,10 +203,10 @@ def descriptor_of(args: argparse.Namespace):
             raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
         return FPFHTransformer()
     name = getattr(args, "model", None)
-    if name == "modelnet40":  # what the default runs under that name: 128 axes
-        from ..registration.defaults import default_descriptor
+    if name == "modelnet40":  # the paper's model as registration matches it: 128 axes
+        from ..registration.defaults import REGISTRATION_COMPONENTS
 
-        return default_descriptor()
+        return load_model(name, REGISTRATION_COMPONENTS)
     return load_model(name) if name else None
 
 

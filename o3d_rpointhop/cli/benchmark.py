@@ -76,7 +76,7 @@ def add_parser(commands) -> None:
         "default), or every core each (Open3D's RANSAC and FGR stay on one thread: only "
         "so does a seed repeat them); the results do not depend on it, the timings do",
     )
-    add_model(p, default="register()'s default, the ModelNet40 model on 128 axes")
+    add_model(p, default="register()'s default, the one-hop object model")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
 

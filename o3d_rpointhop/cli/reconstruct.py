@@ -56,7 +56,7 @@ def add_parser(commands) -> None:
         "--result", help="save the whole result as JSON (MultiwayResult.load reads it back)"
     )
     add_descriptor(p)
-    add_model(p, default="the ModelNet40 model on 128 axes")
+    add_model(p, default="the one-hop object model")
     p.add_argument(
         "--voxel-size", type=float, help="downsample the merged cloud (and the mesh) to this voxel"
     )

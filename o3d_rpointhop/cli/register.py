@@ -45,7 +45,7 @@ def add_parser(commands) -> None:
     p.add_argument("source")
     p.add_argument("target")
     add_descriptor(p)
-    add_model(p, default="the ModelNet40 model on 128 axes")
+    add_model(p, default="the one-hop object model")
     p.add_argument(
         "--global",
         dest="global_method",

@@ -9,11 +9,16 @@ from pathlib import Path
 __all__ = ["PRETRAINED_MODELS", "PRETRAINED_COMPONENTS", "pretrained_path"]
 
 #: The shipped models by name, and their files in ``o3d_rpointhop/data``.
-PRETRAINED_MODELS = {"modelnet40": "rpointhop_modelnet40.npz", "scene": "rpointhop_scene.npz"}
+PRETRAINED_MODELS = {
+    "modelnet40": "rpointhop_modelnet40.npz",
+    "object": "rpointhop_object.npz",
+    "scene": "rpointhop_scene.npz",
+}
 #: What :meth:`RPointHopTransformer.pretrained` returns by default, by name: the
-#: ModelNet40 model's full descriptor (the paper's), and the scene model on the 96
-#: principal axes it was chosen and measured with (docs/model_card.md).
-PRETRAINED_COMPONENTS = {"modelnet40": None, "scene": 96}
+#: ModelNet40 model's full descriptor (the paper's), the one-hop object model's full
+#: 24-D descriptor, and the scene model on the 96 principal axes it was chosen and
+#: measured with (docs/model_card.md).
+PRETRAINED_COMPONENTS = {"modelnet40": None, "object": None, "scene": 96}
 
 
 def pretrained_path(name: str) -> AbstractContextManager[Path]:

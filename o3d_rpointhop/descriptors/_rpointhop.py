@@ -414,21 +414,26 @@ class RPointHopTransformer(BaseDescriptor):
 
         Parameters
         ----------
-        name : {"modelnet40", "scene"}
-            ``"modelnet40"``: paper object settings, fitted on a ModelNet40 train subset
-            (144 shapes, 1024 random points each); see ``docs/model_card.md``.
+        name : {"modelnet40", "object", "scene"}
+            ``"modelnet40"``: paper object settings (four hops), fitted on a ModelNet40
+            train subset (144 shapes, 1024 random points each); see
+            ``docs/model_card.md``. ``"object"``: one hop of 96 neighbours (24-D),
+            fitted on the same shapes, chosen on them for registration success and time
+            together: what :func:`~o3d_rpointhop.register` and
+            :func:`~o3d_rpointhop.register_multiway` describe with by default.
             ``"scene"``: the paper's scene attributes (normals and eigenvalue features),
             one hop of 96 neighbours, fitted with frames facing the sensor on 3DMatch
             fragments of four scenes, named in its ``training_scenes_``; made by
             ``scripts/fit_scene_model.py``. Describe with ``viewpoints`` (see
             ``docs/model_card.md``).
         n_components : int, None or "default", default="default"
-            ``None``: the full descriptor (1624-D for ``"modelnet40"``, 104-D for
-            ``"scene"``). An int up to the axes the file holds (128 for
-            ``"modelnet40"``, 96 for ``"scene"``): the descriptor's projection on that
-            many principal axes, fitted on the same training data. ``"default"``: the
-            model's own choice (``PRETRAINED_COMPONENTS``): the full paper descriptor
-            for ``"modelnet40"``, the 96 axes every scene result was measured with for
+            ``None``: the full descriptor (1624-D for ``"modelnet40"``, 24-D for
+            ``"object"``, 104-D for ``"scene"``). An int up to the axes the file holds
+            (128 for ``"modelnet40"``, 96 for ``"scene"``, none for ``"object"``): the
+            descriptor's projection on that many principal axes, fitted on the same
+            training data. ``"default"``: the model's own choice
+            (``PRETRAINED_COMPONENTS``): the full descriptor for ``"modelnet40"`` and
+            ``"object"``, the 96 axes every scene result was measured with for
             ``"scene"``.
 
         Returns

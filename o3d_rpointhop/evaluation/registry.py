@@ -39,7 +39,7 @@ class Entry:
 #: The scan-set benchmark's methods (``o3d-rpointhop benchmark multiway``).
 MULTIWAY = (
     Entry(
-        "multiway", "rpointhop", "R-PointHop (pretrained, default axes) through register_multiway"
+        "multiway", "rpointhop", "R-PointHop (register()'s default model) through register_multiway"
     ),
     Entry("multiway", "fpfh", "FPFH (radii from the spacing) through the same pipeline"),
     Entry(
@@ -50,6 +50,7 @@ MULTIWAY = (
 )
 #: The descriptor scaling script's methods (``benchmarks/scaling.py``).
 SCALING = (
+    Entry("scaling", "rpointhop-object", "R-PointHop, the one-hop object model (24-D)"),
     Entry("scaling", "rpointhop-128", "R-PointHop, pretrained, 128 principal axes"),
     Entry("scaling", "rpointhop-32", "R-PointHop, pretrained, 32 principal axes"),
     Entry("scaling", "rpointhop-full", "R-PointHop, pretrained, 1624-D"),

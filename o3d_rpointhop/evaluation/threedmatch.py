@@ -62,8 +62,8 @@ def run_3dmatch(
     normals and local frames face the camera: R-PointHop's frames, this library's FPFH
     and Open3D's recipes alike (KISS-Matcher takes none). ``None``: no method is told.
 
-    ``model`` is the descriptor of the ``rpointhop-*`` methods (default: the
-    pretrained ModelNet40 model on 128 axes); ``rpointhop-scene`` uses the shipped
+    ``model`` is the descriptor of the ``rpointhop-*`` methods (default:
+    ``register()``'s, the shipped one-hop object model); ``rpointhop-scene`` uses the shipped
     scene model and ``rpointhop-loso``, for each pair, a scene model fitted on the
     fragments of every other scene in the data folder (fitted at the start of the run).
 

@@ -189,8 +189,8 @@ def register_multiway(
     clouds : list of array-like (n_k, 3) or Open3D point clouds
         At least two scans; sizes and resolutions may differ.
     descriptor : transformer, default=None
-        ``None`` is ``register()``'s default (the pretrained R-PointHop model on 128
-        principal axes); an ``FPFHTransformer`` works the same way. Each scan is
+        ``None`` is ``register()``'s default (the shipped one-hop object model,
+        ``pretrained("object")``); an ``FPFHTransformer`` works the same way. Each scan is
         described once. Pairs are screened with the global step the descriptor states
         (``registration_global_method_``: the consensus for the shipped scene model,
         so that ``RPointHopTransformer.pretrained("scene")`` registers scans of rooms

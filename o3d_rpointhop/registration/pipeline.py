@@ -88,10 +88,10 @@ class RegistrationPipeline(_BaseComposition):
     steps : list of (str, RegistrationStep)
     descriptor : transformer, default=None
         Descriptor for global steps that do not name their own; ``None`` is the
-        pretrained R-PointHop model. :meth:`fit` fits a clone of it on the pairs' clouds
-        (wrap a pretrained model in ``sklearn.frozen.FrozenEstimator`` to keep it as it
-        is); :meth:`register` uses the fitted clone after :meth:`fit`, the descriptor as
-        given before.
+        shipped one-hop object model (``pretrained("object")``). :meth:`fit` fits a
+        clone of it on the pairs' clouds (wrap a pretrained model in
+        ``sklearn.frozen.FrozenEstimator`` to keep it as it is); :meth:`register` uses
+        the fitted clone after :meth:`fit`, the descriptor as given before.
     voxel_size : float or "auto", default="auto"
         Resolution of the registration. ``"auto"``: clouds of up to ``n_global_points``
         points are used as they are, with their point spacing as the resolution; larger
@@ -420,7 +420,7 @@ def register(
         Any size and metric scale; not modified.
     descriptor : transformer, default=None
         Fitted ``RPointHopTransformer`` or an ``FPFHTransformer``; ``None`` is the
-        pretrained R-PointHop model.
+        shipped one-hop object model (``pretrained("object")``, 24-D).
     global_method : {"auto", "ransac", "consensus", "fgr", "svd"}, RegistrationStep or \
             None, default="auto"
         ``"ransac"`` is :class:`RANSACGlobal`, ``"consensus"`` the correspondence-graph

@@ -7,10 +7,12 @@ import json
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import (
     RPointHopTransformer,
 )
+from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.evaluation.scene_models import (
     REGISTRATION_GLOBAL_METHOD,
     REGISTRATION_POINTS,
@@ -53,6 +55,36 @@ def test_shipped_scene_model_comes_as_measured():
     objects = RPointHopTransformer.pretrained()
     assert objects.n_features_out_ == 1624 and not hasattr(objects, "registration_points_")
     assert not hasattr(objects, "registration_global_method_")
+
+
+def test_shipped_object_model_comes_as_chosen():
+    """The one-hop object model of benchmarks/object_model_selection.py: 96 neighbours,
+    frames of 96 points, 24-D, no principal axes and no registration hints (register()'s
+    own defaults were chosen for it)."""
+    from o3d_rpointhop.registration.defaults import DEFAULT_MODEL, default_descriptor
+
+    model = RPointHopTransformer.pretrained("object")
+    assert (model.n_neighbors, model.hop_sizes, model.lrf_neighbors) == ((96,), (1.0,), 96)
+    assert model.attributes == ("xyz",) and model.pooling == "octants"
+    assert model.n_features_out_ == 24 and model.components_ is None
+    assert not hasattr(model, "registration_points_")
+    assert not hasattr(model, "registration_global_method_")
+    with pytest.raises(ValueError, match="principal axes"):
+        RPointHopTransformer.pretrained("object", n_components=8)
+    assert DEFAULT_MODEL == "object"
+    assert default_descriptor().get_params() == model.get_params()
+
+
+def test_the_object_model_is_rigid_invariant():
+    rng = np.random.default_rng(4)
+    cloud = make_object(700, shape_seed=8, sample_seed=1)
+    model = RPointHopTransformer.pretrained("object")
+    rotation = Rotation.random(random_state=5).as_matrix()
+    moved = cloud[::-1] @ rotation.T + rng.uniform(-50, 50, 3)
+    desc, back = model.transform(cloud), model.transform(moved)[::-1]
+    spread = np.abs(desc - desc.mean(0)).max()
+    assert desc.shape == (700, 24) and np.isfinite(desc).all()
+    assert np.abs(back - desc).max() <= 1e-5 * spread
 
 
 def test_pretrained_models_share_one_read_only_copy_of_the_file(monkeypatch):

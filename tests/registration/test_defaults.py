@@ -85,3 +85,20 @@ def test_register_runs_the_step_the_model_states(object_model):
     stated.registration_global_method_ = "magic"
     with pytest.raises(ValueError, match="registration_global_method_ 'magic'"):
         register(moved, cloud, stated)
+
+
+def test_register_describes_with_the_object_model_when_given_none():
+    """No descriptor means the shipped one-hop object model: the same result, to the
+    bit, as naming it."""
+    from o3d_rpointhop import RPointHopTransformer
+
+    target = make_object(900, shape_seed=12, sample_seed=1)
+    source = make_object(900, shape_seed=12, sample_seed=2) + [0.2, -0.1, 0.3]
+    default = register(source, target, seed=3)
+    named = register(source, target, RPointHopTransformer.pretrained("object"), seed=3)
+    assert default.transformation.tobytes() == named.transformation.tobytes()
+    assert default.fitness == named.fitness and default.inlier_rmse == named.inlier_rmse
+    context = RegistrationContext(source, target)
+    context.features(None, "source")
+    assert context.descriptor.n_features_out_ == 24
+    assert context.descriptor.get_params() == RPointHopTransformer.pretrained("object").get_params()
