@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from o3d_rpointhop import FPFHTransformer, register_multiway
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.evaluation.protocols import crop_nearest
+from o3d_rpointhop.evaluation.provenance import multiway_provenance
 from o3d_rpointhop.evaluation.report import split_timings
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
 
@@ -92,6 +93,7 @@ def main(argv=None) -> int:
         }
         print(method, json.dumps(out["methods"][method]), flush=True)
     args.output.mkdir(parents=True, exist_ok=True)
+    out["provenance"] = multiway_provenance(["rpointhop", "fpfh"])
     kept, timed = split_timings(out)
     (args.output / "multiway_synthetic.json").write_text(json.dumps(kept, indent=1) + "\n")
     timings = args.output / "multiway_synthetic_timings.json"

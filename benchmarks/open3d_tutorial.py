@@ -260,6 +260,22 @@ def markdown(results):
     return "\n".join(lines) + "\n"
 
 
+def provenance(args) -> dict:
+    """What made the run: each flow's features (the R-PointHop models by content hash)
+    and the thread budgets it ran on."""
+    from o3d_rpointhop.evaluation.provenance import descriptor_provenance
+
+    features = {
+        "fpfh": {
+            "class": "open3d.pipelines.registration.compute_fpfh_feature",
+            "params": "the tutorial's: normals within 2 voxels (30 neighbours), "
+            "features within 5 voxels (100 neighbours)",
+        }
+    }
+    features.update({name: feature_model(name) for name in args.features})
+    return descriptor_provenance(features, threads=" and ".join(args.budgets) + " (per run)")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=None)
@@ -270,7 +286,7 @@ def main(argv=None) -> int:
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     makers = {"choose": choose_pairs, "bunny-neighbours": neighbour_pairs, "bunny": bunny_pairs}
-    results = {"machine": machine_facts(), "runs": {}}
+    results = {"machine": machine_facts(), "runs": {}, "provenance": provenance(args)}
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         for name in args.sets:
             pairs, tol = makers[name](args.data)

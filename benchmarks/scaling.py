@@ -182,6 +182,28 @@ def plot(rows: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def provenance(budgets: list[str]) -> dict:
+    """What made the run: each method's descriptor (the R-PointHop models by content
+    hash) and the thread budgets the rows were measured on."""
+    from o3d_rpointhop import RPointHopTransformer
+    from o3d_rpointhop.evaluation.provenance import descriptor_provenance
+
+    return descriptor_provenance(
+        {
+            "rpointhop-object": RPointHopTransformer.pretrained("object"),
+            "rpointhop-128": RPointHopTransformer.pretrained(n_components=128),
+            "rpointhop-32": RPointHopTransformer.pretrained(n_components=32),
+            "rpointhop-full": RPointHopTransformer.pretrained(n_components=None),
+            "fpfh": {
+                "class": "open3d.pipelines.registration.compute_fpfh_feature",
+                "params": "normals within 6x and histograms within 15x the point spacing, "
+                "at most 30 / 100 neighbours",
+            },
+        },
+        threads=" and ".join(budgets) + " (each row says which)",
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sizes", type=int, nargs="+", default=[2000, 20000, 200000, 1000000])
@@ -211,6 +233,7 @@ def main() -> None:
         "open3d": open3d.__version__,
         "methods": METHODS,
         "rows": rows,
+        "provenance": provenance(args.budgets),
     }
     (folder / "scaling.json").write_text(json.dumps(result, indent=1))
     (folder / "scaling.md").write_text(markdown(rows, args.sizes))

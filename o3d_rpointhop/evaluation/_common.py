@@ -14,7 +14,7 @@ from ..open3d_interop import to_point_cloud
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
 from ..registration.settings import resolve_voxel_size
 from .methods import run_method
-from .metrics import is_symmetry, pair_errors, summarize
+from .metrics import is_symmetry, modified_chamfer, pair_errors, summarize
 from .records import PairRecord
 
 __all__ = ["Progress", "evaluate_methods", "fixed_resolution", "register_resolution"]
@@ -108,8 +108,19 @@ def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=Non
             if shapes is not None:
                 symmetric = is_symmetry(run.transformation, pair.truth, shapes[k])
             errors = pair_errors(run.transformation, pair.truth)
+            chamfer = None
+            if pair.shape is not None:
+                chamfer = modified_chamfer(
+                    run.transformation, pair.truth, pair.source, pair.target, pair.shape
+                )
             recs.append(
-                PairRecord(**errors, seconds=run.seconds, pair=pair.name, symmetric=symmetric)
+                PairRecord(
+                    **errors,
+                    seconds=run.seconds,
+                    pair=pair.name,
+                    symmetric=symmetric,
+                    chamfer=chamfer,
+                )
             )
             progress.step(method)
         summaries[method] = summarize(recs, *tol)

@@ -99,9 +99,11 @@ def _fpfh_ransac(source, target, voxel, seed, viewpoints=None):
 
 
 def open3d_recipe_descriptor():
-    """The descriptor of the Open3D-native recipe: the pretrained model on 32 axes, which
-    Open3D's k-d tree over features searches fast (1624-D made its RANSAC 40-230x slower)."""
-    return RPointHopTransformer.pretrained(n_components=32)
+    """The descriptor of the Open3D-native recipe: the one-hop object model (24-D), what
+    docs/registration.md recommends for Open3D's RANSAC (chosen on training pairs by
+    benchmarks/open3d_tutorial.py); Open3D's k-d tree over features searches a few
+    dozen dimensions fast (the 1624-D descriptor made its RANSAC 40-230x slower)."""
+    return RPointHopTransformer.pretrained("object")
 
 
 def _rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints=None):
@@ -166,7 +168,7 @@ class Method:
     model : {"given", "scene", "loso", "recipe", None}
         The R-PointHop model it describes with: the benchmark's (``"given"``), the
         shipped scene model, each pair's leave-one-scene-out model, the Open3D recipe's
-        32-axis model (:func:`open3d_recipe_descriptor`), or none.
+        model (:func:`open3d_recipe_descriptor`: the object model), or none.
     descriptor : {"rpointhop", "fpfh", "open3d-fpfh", "kiss-matcher", "none"}
         What describes the points: R-PointHop (``model`` says which), this library's
         ``FPFHTransformer``, Open3D's FPFH as its tutorial computes it, KISS-Matcher's
@@ -447,7 +449,7 @@ METHODS = _methods(
     ),
     Method(
         "rpointhop-open3d-ransac-icp",
-        "R-PointHop (32 axes) in Open3D's RANSAC recipe + point-to-plane ICP",
+        "R-PointHop (object model) in Open3D's RANSAC recipe + point-to-plane ICP",
         _run_rpointhop_open3d,
         default_on=_OBJECTS,
         model="recipe",

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-__all__ = ["Pair", "PROTOCOLS", "make_pairs", "crop_nearest"]
+__all__ = ["Pair", "PROTOCOLS", "make_pairs", "crop_by_plane", "crop_nearest"]
 
 
 @dataclass
@@ -29,6 +29,9 @@ class Pair:
         The source points without noise, in the target frame (``truth`` applied).
     name : str
         Which shape it came from.
+    shape : ndarray of shape (m, 3) or None
+        The whole clean shape both clouds were cut from, in the target frame: the
+        protocols that score the modified Chamfer distance (RPM-Net's) keep it.
     """
 
     source: np.ndarray
@@ -36,6 +39,7 @@ class Pair:
     truth: np.ndarray
     source_clean: np.ndarray
     name: str = ""
+    shape: np.ndarray | None = None
 
 
 PROTOCOLS = {
@@ -49,7 +53,15 @@ PROTOCOLS = {
     "resampled-noise": "as 'resampled', Gaussian noise (sigma 0.01, clipped at 0.05) on the source",
     "resampled-partial": "as 'resampled', source and target each cropped to the 70 % of points "
     "nearest to an independent random point",
+    "rpmnet-partial": "RPM-Net's partial-visibility protocol (Yew and Lee, CVPR 2020): source "
+    "and target each cut from the shape's 2048 points by an independent random plane that "
+    "keeps 70 % of them, 717 points drawn from each, Euler angles in [0, 45] deg, translation "
+    "in [-0.5, 0.5], Gaussian noise (sigma 0.01, clipped at 0.05) on both",
+    "rpmnet-partial-so3": "as 'rpmnet-partial', with rotations uniform over SO(3)",
 }
+#: RPM-Net's crop: the share of each cloud a random plane keeps, and the points drawn
+#: from what it keeps (``ceil(0.7 * 1024)``).
+RPMNET_KEEP, RPMNET_POINTS = 0.7, 717
 
 
 def crop_nearest(points: np.ndarray, fraction: float, rng: np.random.Generator) -> np.ndarray:
@@ -58,6 +70,39 @@ def crop_nearest(points: np.ndarray, fraction: float, rng: np.random.Generator) 
     keep = int(round(fraction * len(points)))
     _, idx = cKDTree(points).query(centre, k=keep)
     return np.sort(np.atleast_1d(idx))
+
+
+def crop_by_plane(points: np.ndarray, fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """Indices of the ``fraction`` of points on the far side of a random plane: the
+    plane is normal to a direction drawn uniformly on the sphere and shifted along it
+    until it keeps that share of the points (RPM-Net's crop)."""
+    direction = rng.normal(size=3)
+    direction /= np.linalg.norm(direction)
+    height = (points - points.mean(axis=0)) @ direction
+    return np.flatnonzero(height > np.percentile(height, 100.0 * (1.0 - fraction)))
+
+
+def _rpmnet_pair(shape: np.ndarray, rng: np.random.Generator, so3: bool):
+    """``(source, target, truth, source_clean)`` of RPM-Net's partial protocol."""
+    views = []
+    for _ in range(2):
+        kept = crop_by_plane(shape, RPMNET_KEEP, rng)
+        views.append(shape[np.sort(rng.choice(kept, RPMNET_POINTS, replace=False))])
+    truth_source, target = views
+    if so3:
+        rotation = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+    else:
+        rotation = _euler_rotation(rng, 45.0)
+    shift = rng.uniform(-0.5, 0.5, 3)
+
+    def noisy(points):
+        return points + np.clip(rng.normal(scale=0.01, size=points.shape), -0.05, 0.05)
+
+    source = noisy(truth_source) @ rotation.T + shift
+    truth = np.eye(4)
+    truth[:3, :3] = rotation.T
+    truth[:3, 3] = -rotation.T @ shift
+    return source, noisy(target), truth, truth_source
 
 
 def _euler_rotation(rng: np.random.Generator, max_angle_deg: float) -> np.ndarray:
@@ -89,11 +134,17 @@ def make_pairs(
         raise ValueError(f"unknown protocol {protocol!r}; choose from {sorted(PROTOCOLS)}")
     if shapes.ndim != 3 or shapes.shape[2] != 3:
         raise ValueError(f"shapes must be an (n_shapes, n_points, 3) array, got {shapes.shape}")
-    if protocol.startswith("resampled") and shapes.shape[1] < 2048:
-        raise ValueError("resampled protocols need shapes of (at least) 2048 points")
+    if protocol.startswith(("resampled", "rpmnet")) and shapes.shape[1] < 2048:
+        raise ValueError("resampled and RPM-Net protocols need shapes of (at least) 2048 points")
     rng = np.random.default_rng(seed)
     pairs = []
     for i, shape in enumerate(shapes):
+        name = names[i] if names else str(i)
+        if protocol.startswith("rpmnet"):
+            whole = shape[:2048]
+            source, target, truth, clean = _rpmnet_pair(whole, rng, protocol.endswith("so3"))
+            pairs.append(Pair(source, target, truth, clean, name, whole))
+            continue
         target = shape[:1024]
         if protocol.startswith("paper"):
             rotation = _euler_rotation(rng, max_angle_deg)
@@ -117,6 +168,5 @@ def make_pairs(
         truth = np.eye(4)
         truth[:3, :3] = rotation.T
         truth[:3, 3] = -rotation.T @ shift
-        name = names[i] if names else str(i)
         pairs.append(Pair(source, target, truth, truth_source, name))
     return pairs

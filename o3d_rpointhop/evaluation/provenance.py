@@ -29,6 +29,7 @@ from .methods import METHODS, open3d_recipe_descriptor, shipped_scene_model
 __all__ = [
     "REQUIRED",
     "check_provenance",
+    "descriptor_provenance",
     "model_identity",
     "multiway_provenance",
     "read_results",
@@ -198,6 +199,24 @@ def run_provenance(methods, model: RPointHopTransformer, loso: dict | None = Non
     return {
         **_run_facts(),
         "methods": {name: _method_entry(name, model, loso or {}, identity) for name in methods},
+    }
+
+
+def descriptor_provenance(descriptors: dict, threads: str | None = None) -> dict:
+    """The provenance of a script's run: ``descriptors`` maps each method to its
+    descriptor, a fitted ``RPointHopTransformer`` (named by :func:`model_identity`) or
+    a dict that describes another one; ``threads`` overrides the thread budget (a
+    script that measures both says so)."""
+    identity = _memoised_identity()
+    facts = _run_facts()
+    if threads is not None:
+        facts["threads"] = threads
+    return {
+        **facts,
+        "methods": {
+            name: {"descriptor": d if isinstance(d, dict) else identity(d)}
+            for name, d in descriptors.items()
+        },
     }
 
 

@@ -52,6 +52,9 @@ class PairRecord(_Record):
         The pair's name.
     symmetric : bool or None
         Whether the estimate is a symmetry of the shape (None: not checked).
+    chamfer : float or None
+        RPM-Net's modified Chamfer distance (:func:`~.metrics.modified_chamfer`; None:
+        the protocol keeps no whole shape to measure it against).
     """
 
     rotation_error_deg: float
@@ -61,8 +64,9 @@ class PairRecord(_Record):
     seconds: float = 0.0
     pair: str | None = None
     symmetric: bool | None = None
+    chamfer: float | None = None
 
-    _optional = frozenset({"pair", "symmetric"})
+    _optional = frozenset({"pair", "symmetric", "chamfer"})
 
 
 @dataclass

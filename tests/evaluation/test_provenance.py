@@ -51,7 +51,8 @@ def test_every_method_names_its_descriptor(fitted):
     # The scene methods name the scene model, not the benchmark's own.
     assert methods["rpointhop-scene"]["descriptor"]["sha256"] == content_hash(scene)
     assert methods["rpointhop-ransac-icp"]["descriptor"]["sha256"] == content_hash(fitted)
-    assert methods["rpointhop-open3d-ransac-icp"]["descriptor"]["n_features_out"] == 32
+    recipe = methods["rpointhop-open3d-ransac-icp"]["descriptor"]
+    assert recipe["model"] == "object" and recipe["n_features_out"] == 24
     assert methods["rpointhop-loso"]["descriptor"]["per_scene"]["scene-a"]["model"] == "fitted"
     assert methods["fpfh-pipeline-consensus-icp"]["descriptor"]["class"].endswith("FPFHTransformer")
     assert methods["fpfh-ransac-icp"]["descriptor"]["class"].startswith("open3d.")
@@ -109,13 +110,6 @@ WITHOUT_PROVENANCE = frozenset(
         "3dmatch_heldout_timing_sample_all.json",
         "3dmatch_training_gate.json",
         "descriptor_quality.json",
-        "modelnet40.json",
-        "modelnet40_timing_sample.json",
-        "modelnet40_timing_sample_all.json",
-        "multiway.json",
-        "multiway_synthetic.json",
-        "open3d_tutorial.json",
-        "scaling.json",
         "speed.json",
         "startup.json",
     }
