@@ -7,8 +7,9 @@ functions too:
 (``transforms``, ``open3d_interop``, ``io``, ``plotting``, ``datasets``) import only
 ``_utils``; a module may import its own layer or those below it, never one above, and
 never the package's top (which only re-exports). No two modules import each other
-through any chain, and the R-PointHop maths (``descriptors.pointhop``) imports no
-scikit-learn.
+through any chain, no module imports another module's private name (one with a leading
+underscore: a private *module*'s public names are the package-internal API), and the
+R-PointHop maths (``descriptors.pointhop``) imports no scikit-learn.
 """
 
 from __future__ import annotations
@@ -95,6 +96,29 @@ def imports_of(source: str, name: str, is_package: bool, runtime_only: bool = Fa
     return found
 
 
+def private_imports(source: str, name: str, is_package: bool) -> list[str]:
+    """Every private name (``_x``, not a dunder) that ``source`` imports from another
+    module of the package; importing a private module is not counted."""
+    package = name if is_package else name.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        if node.level:
+            base = package.split(".")
+            base = base[: len(base) - (node.level - 1)]
+            target = ".".join(base + ([node.module] if node.module else []))
+        else:
+            target = node.module or ""
+        if target.split(".")[0] != TOP:
+            continue
+        for alias in node.names:
+            private = alias.name.startswith("_") and not alias.name.startswith("__")
+            if private and not _exists(f"{target}.{alias.name}"):
+                found.append(f"{name} imports {alias.name} from {target}")
+    return found
+
+
 def import_graph(runtime_only: bool = False) -> dict[str, set[str]]:
     graph = {}
     for path in PACKAGE.rglob("*.py"):
@@ -149,6 +173,27 @@ def test_every_module_has_a_layer():
 
 def test_imports_run_down_the_layers():
     assert violations(import_graph()) == []
+
+
+def test_no_private_name_crosses_a_module():
+    found = []
+    for path in PACKAGE.rglob("*.py"):
+        found += private_imports(path.read_text(), module_name(path), path.name == "__init__.py")
+    assert found == []
+
+
+def test_the_check_finds_private_names_not_private_modules():
+    source = (
+        "from ._consensus import _bits, consensus_sets\n"
+        "from . import _ransac\n"
+        "def f():\n    from ..pipeline import _check\n"
+    )
+    found = private_imports(source, f"{TOP}.registration.steps.consensus", is_package=False)
+    steps = f"{TOP}.registration.steps"
+    assert found == [
+        f"{steps}.consensus imports _bits from {steps}._consensus",
+        f"{steps}.consensus imports _check from {TOP}.registration.pipeline",
+    ]
 
 
 def test_no_import_cycles():

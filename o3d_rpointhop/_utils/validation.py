@@ -6,12 +6,21 @@ Everything that accepts point clouds goes through :func:`as_points` (one cloud) 
 
 from __future__ import annotations
 
+import numbers
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_points", "as_cloud_list", "as_viewpoints", "is_open3d_cloud", "MAX_COORDINATE"]
+__all__ = [
+    "as_points",
+    "as_cloud_list",
+    "as_viewpoints",
+    "check_rigid_transformation",
+    "is_open3d_cloud",
+    "is_positive_number",
+    "MAX_COORDINATE",
+]
 
 #: Largest coordinate accepted: squared distances of larger ones overflow float64.
 MAX_COORDINATE = 1e150
@@ -190,3 +199,26 @@ def as_viewpoints(viewpoints: Any, n_clouds: int, name: str = "viewpoints") -> l
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} holds NaN or infinite coordinates")
     return [np.array(v) for v in arr]
+
+
+def is_positive_number(value: Any) -> bool:
+    """A finite real number above zero (not a bool)."""
+    return (
+        isinstance(value, numbers.Real)
+        and not isinstance(value, bool)
+        and bool(np.isfinite(value))
+        and value > 0
+    )
+
+
+def check_rigid_transformation(value: Any, name: str = "init") -> np.ndarray:
+    """``value`` as a float64 4x4 rigid transformation; a ValueError naming ``name``
+    unless it is finite, 4x4, and its upper-left block a rotation (orthonormal within
+    1e-6, determinant +1)."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (4, 4) or not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be a finite 4x4 matrix, got shape {arr.shape}")
+    rot = arr[:3, :3]
+    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise ValueError(f"{name}'s upper-left 3x3 block must be a rotation matrix")
+    return arr

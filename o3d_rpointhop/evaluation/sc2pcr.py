@@ -36,7 +36,7 @@ from .._utils.params import Interval
 from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
 from ..registration.steps import ConsensusGlobal
-from ..registration.steps._consensus import _bits, consensus_sets
+from ..registration.steps._consensus import compatibility_graphs, consensus_sets
 from ..transforms import rigid_transforms
 
 __all__ = ["SC2PCRGlobal", "sc2pcr"]
@@ -196,7 +196,9 @@ def sc2pcr(
     centre = target.mean(axis=0)  # small coordinates wherever the clouds are
     source = np.ascontiguousarray(source - centre)
     target = np.ascontiguousarray(target - centre)
-    hard, tight, _ = _bits(source, target, threshold, threshold / 2, 0.0, None, n_threads)
+    hard, tight, _ = compatibility_graphs(
+        source, target, threshold, threshold / 2, 0.0, None, n_threads
+    )
     with threads(n_threads):
         confidence = _soft_leading_vector(hard, source, target, float(threshold), iterations)
     seeds = _seeds(source, confidence, seed_radius, seed_ratio)

@@ -6,11 +6,11 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from .._utils.validation import check_rigid_transformation, is_positive_number
 from .context import RegistrationContext
 from .flags import assess
-from .pipeline import _check_transformation
 from .result import RegistrationResult, StepResult
-from .settings import RegistrationSettings, _positive
+from .settings import RegistrationSettings
 
 __all__ = ["evaluate"]
 
@@ -63,8 +63,8 @@ def evaluate(
     1.0
     """
     start = time.perf_counter()
-    matrix = _check_transformation(transformation)
-    if distance is not None and not _positive(distance):
+    matrix = check_rigid_transformation(transformation, "transformation")
+    if distance is not None and not is_positive_number(distance):
         raise ValueError(f"distance must be a positive number, got {distance!r}")
     context = RegistrationContext(source, target, voxel_size=voxel_size, settings=settings)
     distance = float(distance or context.settings.evaluation_distance)

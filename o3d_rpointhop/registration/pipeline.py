@@ -19,6 +19,7 @@ from .._utils.params import (
     StrOptions,
     validate_params,
 )
+from .._utils.validation import check_rigid_transformation
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method
@@ -316,7 +317,7 @@ class RegistrationPipeline(_BaseComposition):
 
     def _run(self, steps, context, init, start, ambiguity, stacklevel) -> RegistrationResult:
         """Every step in order on ``context``, then the result's flags."""
-        current = np.eye(4) if init is None else context.to_local(_check_transformation(init))
+        current = np.eye(4) if init is None else context.to_local(check_rigid_transformation(init))
         results = []
         for name, step in steps:
             outcome = step._run_timed(context, current)
@@ -345,16 +346,6 @@ class RegistrationPipeline(_BaseComposition):
             converged=quality.converged,
             ambiguous=quality.ambiguous,
         )
-
-
-def _check_transformation(value: Any) -> np.ndarray:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (4, 4) or not np.isfinite(arr).all():
-        raise ValueError(f"init must be a finite 4x4 matrix, got shape {arr.shape}")
-    rot = arr[:3, :3]
-    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise ValueError("init's upper-left 3x3 block must be a rotation matrix")
-    return arr
 
 
 def _make_step(spec: str | RegistrationStep, table: dict) -> RegistrationStep:

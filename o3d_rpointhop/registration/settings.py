@@ -15,11 +15,11 @@ from __future__ import annotations
 import dataclasses
 import numbers
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from .._utils.geometry import point_spacing
+from .._utils.validation import is_positive_number
 from ..descriptors import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR
 
 __all__ = ["RegistrationSettings", "resolve_voxel_size"]
@@ -118,7 +118,7 @@ class RegistrationSettings:
                     raise ValueError(f"icp_factors must be a non-empty tuple, got {value!r}")
                 object.__setattr__(self, f.name, tuple(float(v) for v in value))
             for v in values:
-                if not _positive(v):
+                if not is_positive_number(v):
                     raise ValueError(f"{f.name} must be a positive number, got {v!r}")
 
     def at(self, voxel_size: float) -> RegistrationSettings:
@@ -191,15 +191,6 @@ class RegistrationSettings:
         return self._times(self.seed_factor)
 
 
-def _positive(value: Any) -> bool:
-    return (
-        isinstance(value, numbers.Real)
-        and not isinstance(value, bool)
-        and bool(np.isfinite(value))
-        and value > 0
-    )
-
-
 def resolve_voxel_size(source, target, voxel_size: float | str, n_global_points: int):
     """The resolution of a registration, and whether the global step downsamples.
 
@@ -222,7 +213,7 @@ def resolve_voxel_size(source, target, voxel_size: float | str, n_global_points:
     downsampled : bool
     """
     if isinstance(voxel_size, numbers.Real) and not isinstance(voxel_size, bool):
-        if not _positive(voxel_size):
+        if not is_positive_number(voxel_size):
             raise ValueError(f"voxel_size must be positive, got {voxel_size!r}")
         return float(voxel_size), True
     if voxel_size != "auto":

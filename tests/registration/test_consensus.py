@@ -149,13 +149,13 @@ def test_masks_drop_close_pairs_and_shared_endpoints():
 def test_the_second_order_graph_is_the_tighter_threshold():
     """With a second-order threshold below the first, the second graph holds exactly
     the pairs whose length difference is below it."""
-    from o3d_rpointhop.registration.steps._consensus import _bits
+    from o3d_rpointhop.registration.steps._consensus import compatibility_graphs
 
     source, target, _, _ = synthetic_matches(200, 0.5, seed=4, noise=0.01)
     ds = np.linalg.norm(source[:, None] - source[None], axis=2)
     dt = np.linalg.norm(target[:, None] - target[None], axis=2)
     gap = np.abs(ds - dt)
-    first, second, degree = _bits(source, target, 0.05, 0.02, 0.0, None)
+    first, second, degree = compatibility_graphs(source, target, 0.05, 0.02, 0.0, None)
 
     def dense(bits):
         return np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")[:, :200] > 0
@@ -250,7 +250,7 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
     """Graph bits, degrees, the seeds' best partners by common neighbours (ties to the
     lower index) and the truncated scores, against plain numpy on dense matrices."""
     from o3d_rpointhop.registration.steps._consensus import (
-        _bits,
+        compatibility_graphs,
         consensus_sets,
         truncated_scores,
     )
@@ -259,7 +259,7 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
     source, target, _, _ = synthetic_matches(m, 0.5, seed=m, noise=0.01)
     ends = (rng.integers(0, m, m), rng.integers(0, m, m))
     first, second = _reference_graphs(source, target, 0.1, 0.05, 0.2, ends)
-    bits, bits2, degree = _bits(source, target, 0.1, 0.05, 0.2, ends)
+    bits, bits2, degree = compatibility_graphs(source, target, 0.1, 0.05, 0.2, ends)
     unpack = lambda b: np.unpackbits(b.view(np.uint8), axis=1, bitorder="little")[:, :m]  # noqa: E731
     np.testing.assert_array_equal(unpack(bits).astype(bool), first)
     np.testing.assert_array_equal(unpack(bits2).astype(bool), second)
@@ -272,7 +272,7 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
         again = consensus_sets(bits, bits2, seeds, k, n_threads)
         np.testing.assert_array_equal(again[0], members)
         np.testing.assert_array_equal(again[1], scores)
-        threaded = _bits(source, target, 0.1, 0.05, 0.2, ends, n_threads)
+        threaded = compatibility_graphs(source, target, 0.1, 0.05, 0.2, ends, n_threads)
         np.testing.assert_array_equal(threaded[1], bits2)
     shared = second.astype(np.int64) @ second.astype(np.int64)
     for s, i in enumerate(seeds):

@@ -38,7 +38,14 @@ from ..._utils.threads import run_blocks
 from ...transforms import rigid_transform, rigid_transforms
 from ._refit import refit_while_growing
 
-__all__ = ["ConsensusResult", "compatibility", "consensus"]
+__all__ = [
+    "ConsensusResult",
+    "compatibility",
+    "compatibility_graphs",
+    "consensus",
+    "consensus_sets",
+    "truncated_scores",
+]
 
 
 @dataclass
@@ -217,9 +224,13 @@ def _truncated_scores(
         out[first:last] = total
 
 
-def _bits(source, target, threshold, second_threshold, min_span, endpoints, n_threads=1):
-    """Both compatibility graphs and the first's degrees (see
-    :func:`_compatibility_bits`); ``endpoints`` None masks no shared endpoint."""
+def compatibility_graphs(
+    source, target, threshold, second_threshold, min_span, endpoints, n_threads=1
+):
+    """Both compatibility graphs of the matches ``source[i] <-> target[i]``, packed 64
+    matches to a word, and the first's degrees (see :func:`_compatibility_bits`);
+    ``endpoints`` None masks no shared endpoint. The consensus step and the SC2-PCR
+    peer build their graphs with it."""
     m = len(source)
     if endpoints is None:
         # Distinct ids on both sides: no pair shares an endpoint.
@@ -295,7 +306,7 @@ def compatibility(
     the two lengths sum to at least ``min_span``, and (with ``endpoints``, the matches'
     source and target point ids) the matches share neither point.
     """
-    bits, _, _ = _bits(source, target, threshold, None, min_span, endpoints)
+    bits, _, _ = compatibility_graphs(source, target, threshold, None, min_span, endpoints)
     m = len(source)
     dense = np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")
     return dense[:, :m].astype(bool)
@@ -426,7 +437,7 @@ def consensus(
     centre = target.mean(axis=0)
     source = np.ascontiguousarray(source - centre)
     target = np.ascontiguousarray(target - centre)
-    bits, second, degree = _bits(
+    bits, second, degree = compatibility_graphs(
         source,
         target,
         compatibility_threshold,

@@ -1,0 +1,41 @@
+"""evaluate(): the transformation and distance it is given are checked at the edge, by
+the same shared checks as register()'s init, and named as the caller named them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from o3d_rpointhop import register
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.registration import evaluate
+
+
+@pytest.fixture(scope="module")
+def cloud():
+    return make_object(600, shape_seed=4)
+
+
+@pytest.mark.parametrize(
+    "matrix, message",
+    [
+        (np.eye(3), "transformation must be a finite 4x4 matrix"),
+        (np.full((4, 4), np.nan), "transformation must be a finite 4x4 matrix"),
+        (np.diag([1.0, 1.0, -1.0, 1.0]), "transformation's upper-left 3x3 block"),
+        (np.diag([2.0, 1.0, 1.0, 1.0]), "transformation's upper-left 3x3 block"),
+    ],
+)
+def test_a_bad_transformation_is_named(cloud, matrix, message):
+    with pytest.raises(ValueError, match=message):
+        evaluate(cloud, cloud, matrix)
+
+
+def test_a_bad_init_is_named_init(cloud):
+    with pytest.raises(ValueError, match="init's upper-left 3x3 block"):
+        register(cloud, cloud, global_method=None, init=np.diag([1.0, 1.0, -1.0, 1.0]))
+
+
+@pytest.mark.parametrize("distance", [0.0, -1.0, np.inf, True, "0.1"])
+def test_distance_must_be_a_positive_number(cloud, distance):
+    with pytest.raises(ValueError, match="distance must be a positive number"):
+        evaluate(cloud, cloud, np.eye(4), distance=distance)
