@@ -68,6 +68,15 @@ def _type_only(tree: ast.AST) -> set[int]:
     return ids
 
 
+def _from_target(node: ast.ImportFrom, package: str) -> str:
+    """The absolute module a ``from ... import`` in ``package`` reads from."""
+    if not node.level:
+        return node.module or ""
+    base = package.split(".")
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def imports_of(source: str, name: str, is_package: bool, runtime_only: bool = False) -> set[str]:
     """Every module of the package that ``source`` (module ``name``) imports, at module
     level or inside any function or class; with ``runtime_only``, leaving out imports
@@ -82,12 +91,7 @@ def imports_of(source: str, name: str, is_package: bool, runtime_only: bool = Fa
         if isinstance(node, ast.Import):
             found |= {a.name for a in node.names if a.name.split(".")[0] == TOP}
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[: len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
+            target = _from_target(node, package)
             if target.split(".")[0] != TOP:
                 continue
             for alias in node.names:  # "from . import x" may name a submodule
@@ -104,12 +108,7 @@ def private_imports(source: str, name: str, is_package: bool) -> list[str]:
     for node in ast.walk(ast.parse(source)):
         if not isinstance(node, ast.ImportFrom):
             continue
-        if node.level:
-            base = package.split(".")
-            base = base[: len(base) - (node.level - 1)]
-            target = ".".join(base + ([node.module] if node.module else []))
-        else:
-            target = node.module or ""
+        target = _from_target(node, package)
         if target.split(".")[0] != TOP:
             continue
         for alias in node.names:
