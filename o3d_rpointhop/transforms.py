@@ -10,6 +10,7 @@ __all__ = [
     "apply_transform",
     "rotation_error_deg",
     "translation_error",
+    "rms_displacement",
     "euler_angles_deg",
     "random_rigid_motion",
 ]
@@ -117,9 +118,41 @@ def rotation_error_deg(estimate: np.ndarray, truth: np.ndarray) -> float:
     return float(np.degrees(np.arccos(cos)))
 
 
-def translation_error(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """Euclidean distance between the two translations."""
-    return float(np.linalg.norm(np.asarray(estimate)[:3, 3] - np.asarray(truth)[:3, 3]))
+def translation_error(
+    estimate: np.ndarray, truth: np.ndarray, about: np.ndarray | None = None
+) -> float:
+    """How far apart the two transformations carry the point ``about``.
+
+    Parameters
+    ----------
+    estimate, truth : ndarray of shape (4, 4)
+    about : array-like of shape (3,), default=None
+        ``None``: the origin, where this is the distance between the two translations
+        (the benchmarks' measure, for clouds near the origin). Far from the origin (survey
+        coordinates) pass the cloud's centroid: at the origin a rotation error's last
+        digits are magnified by the distance to the data.
+
+    Returns
+    -------
+    float
+    """
+    estimate, truth = np.asarray(estimate, dtype=np.float64), np.asarray(truth, dtype=np.float64)
+    gap = estimate[:3, 3] - truth[:3, 3]
+    if about is not None:
+        gap = gap + (estimate[:3, :3] - truth[:3, :3]) @ np.asarray(about, dtype=np.float64)
+    return float(np.linalg.norm(gap))
+
+
+def rms_displacement(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) -> float:
+    """Root mean square distance between where ``estimate`` and ``truth`` carry each of
+    ``points``: the error of a registration in the data's own unit, wherever the data
+    lie."""
+    estimate, truth = np.asarray(estimate, dtype=np.float64), np.asarray(truth, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    centre = points.mean(axis=0)
+    rot = estimate[:3, :3] - truth[:3, :3]
+    gap = (points - centre) @ rot.T + (rot @ centre + estimate[:3, 3] - truth[:3, 3])
+    return float(np.sqrt(np.mean(np.sum(gap * gap, axis=1))))
 
 
 def euler_angles_deg(transformation: np.ndarray) -> np.ndarray:

@@ -91,3 +91,19 @@ def test_batched_fits_agree_with_the_single_fit():
             single = rigid_transform(source[b], target[b], None if w is None else w[b])
             np.testing.assert_allclose(rots[b], single[:3, :3], atol=1e-12)
             np.testing.assert_allclose(shifts[b], single[:3, 3], atol=1e-12)
+
+
+def test_translation_error_about_a_point_and_rms_displacement_by_hand():
+    """A quarter turn about z through (10, 0, 0) against the identity: the translations
+    differ by |(10, -10, 0)|, the pivot does not move, and the points (10, 1, 0) and
+    (10, -1, 0) each move by sqrt(2)."""
+    from o3d_rpointhop.transforms import rms_displacement, translation_error
+
+    turn = np.eye(4)
+    turn[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    turn[:3, 3] = [10.0, -10.0, 0.0]  # x -> R (x - p) + p with p = (10, 0, 0)
+    assert translation_error(turn, np.eye(4)) == pytest.approx(np.sqrt(200.0))
+    assert translation_error(turn, np.eye(4), about=[10.0, 0.0, 0.0]) == pytest.approx(0.0)
+    points = np.array([[10.0, 1.0, 0.0], [10.0, -1.0, 0.0]])
+    assert rms_displacement(turn, np.eye(4), points) == pytest.approx(np.sqrt(2.0))
+    assert rms_displacement(np.eye(4), np.eye(4), points) == 0.0

@@ -19,7 +19,10 @@ def add_parser(commands) -> None:
         description="Measure how well a 4x4 transformation (a text file of four rows) maps "
         "SOURCE onto TARGET: Open3D's fitness and inlier RMSE at the correspondence "
         "distance, this library's converged / ambiguous flags, and, with --truth, the "
-        "rotation and translation errors against a ground-truth transformation.",
+        "errors against a ground-truth transformation: the rotation error, the translation "
+        "error about the source's centroid (at the origin a survey cloud's rotation digits "
+        "would be magnified by its distance), and the RMS displacement of the source's "
+        "points between the two transformations.",
     )
     p.add_argument("source")
     p.add_argument("target")
@@ -35,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import read_cloud
     from ..poses import read_matrix
     from ..registration.evaluate import evaluate
-    from ..transforms import rotation_error_deg, translation_error
+    from ..transforms import rms_displacement, rotation_error_deg, translation_error
 
     transformation = read_matrix(args.transform)
     truth = read_matrix(args.truth) if args.truth else None
@@ -59,8 +62,12 @@ def run(args: argparse.Namespace) -> int:
         "ambiguous": result.ambiguous,
     }
     if truth is not None:
+        points = np.asarray(source.points)
         summary["rotation_error_deg"] = rotation_error_deg(transformation, truth)
-        summary["translation_error"] = translation_error(transformation, truth)
+        summary["translation_error"] = translation_error(
+            transformation, truth, about=points.mean(axis=0)
+        )
+        summary["rms_displacement"] = rms_displacement(transformation, truth, points)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -73,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         if truth is not None:
             print(
                 f"against the truth: rotation error {summary['rotation_error_deg']:.4g} deg, "
-                f"translation error {summary['translation_error']:.6g}"
+                f"translation error {summary['translation_error']:.6g} about the source's "
+                f"centroid, RMS displacement of the source's points "
+                f"{summary['rms_displacement']:.6g}"
             )
     return flag_status(result)

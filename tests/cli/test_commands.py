@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import open3d as o3d
+import pytest
 from helpers import moved_pair_files, partial_views, write_points
 
 from o3d_rpointhop import RPointHopTransformer
@@ -245,3 +246,47 @@ def test_shipped_models_by_name(tmp_path):
     np.testing.assert_array_equal(np.load(out), expected)
     assert main(["describe", query, "--model", "modelnet40", "-o", str(out)]) == 0
     assert np.load(out).shape == (600, 1624)
+
+
+def test_evaluate_at_survey_coordinates_reports_the_data_s_error(tmp_path, capsys):
+    """A pair at a UTM-like offset whose estimate is off by a 2e-6 rad turn about the
+    source's centroid: every source point moves by at most 2e-6 of its distance from the
+    centroid (a fraction of a millimetre), while the translations themselves differ by
+    about 2e-6 of the 6e6 m offset, metres."""
+
+    offset = np.array([500_000.0, 6_000_000.0, 120.0])
+    cloud = make_object(800, shape_seed=2) * 40.0 + offset  # a 40 m object at UTM
+    np.save(tmp_path / "s.npy", cloud)
+    np.save(tmp_path / "t.npy", cloud)
+    truth = np.eye(4)
+    angle = 2e-6
+    turn = np.array(
+        [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+    )
+    centre = cloud.mean(axis=0)
+    estimate = np.eye(4)
+    estimate[:3, :3], estimate[:3, 3] = turn, centre - turn @ centre
+    np.savetxt(tmp_path / "T.txt", estimate, fmt="%.17g")
+    np.savetxt(tmp_path / "G.txt", truth, fmt="%.17g")
+    files = [str(tmp_path / "s.npy"), str(tmp_path / "t.npy")]
+    code = main(
+        [
+            "evaluate",
+            *files,
+            "--transform",
+            str(tmp_path / "T.txt"),
+            "--truth",
+            str(tmp_path / "G.txt"),
+            "--json",
+        ]
+    )
+    assert code in (0, 3)
+    summary = json.loads(capsys.readouterr().out)
+    spread = np.linalg.norm(cloud - centre, axis=1)
+    expected_rms = angle * np.sqrt(np.mean(np.sum((cloud - centre)[:, :2] ** 2, axis=1)))
+    # arccos of a trace near 3 keeps about 1e-8 rad: the angle to a per cent
+    assert summary["rotation_error_deg"] == pytest.approx(np.degrees(angle), rel=2e-2)
+    assert summary["translation_error"] < 1e-6  # the centroid is where the turn pivots
+    assert summary["rms_displacement"] == pytest.approx(expected_rms, rel=1e-3)
+    assert summary["rms_displacement"] < angle * spread.max() < 1e-3
+    assert np.linalg.norm(estimate[:3, 3] - truth[:3, 3]) > 10.0  # what the origin would say
