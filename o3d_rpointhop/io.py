@@ -5,14 +5,22 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 
-from ._utils.validation import as_points
+from ._utils.validation import PrecisionWarning, as_points, coarse_float32
 
-__all__ = ["read_cloud", "write_cloud", "OPEN3D_FORMATS", "READ_FORMATS", "MESH_POINTS"]
+__all__ = [
+    "read_cloud",
+    "write_cloud",
+    "OPEN3D_FORMATS",
+    "READ_FORMATS",
+    "MESH_POINTS",
+    "PrecisionWarning",
+]
 
 # Bytes per value of the PLY property types.
 _PLY_SIZES = {
@@ -204,7 +212,13 @@ def _read_kitti(path: Path) -> o3d.geometry.PointCloud:
             "16-byte x, y, z, reflectance records)"
         )
     records = np.fromfile(path, dtype="<f4").reshape(-1, 4)
-    return _cloud(as_points(records[:, :3].astype(np.float64), name=str(path)))
+    points = as_points(records[:, :3].astype(np.float64), name=str(path))
+    # The format's float32 is all the precision there is: say so here, where it is
+    # still known, when it is too coarse for the sweep's own size.
+    problem = coarse_float32(records[:, :3], str(path))
+    if problem is not None:
+        warnings.warn(problem, PrecisionWarning, stacklevel=3)
+    return _cloud(points)
 
 
 def _sample_mesh(path: Path, n_points: int) -> o3d.geometry.PointCloud:

@@ -95,6 +95,37 @@ def test_kitti_sweeps_are_read_and_partial_records_refused(tmp_path):
         read_cloud(tmp_path / "cut.bin")
 
 
+def test_a_kitti_sweep_too_coarse_for_its_size_says_so_when_read(tmp_path):
+    """float32 is the format's precision: a 20 m sweep stored at UTM coordinates is
+    rounded to a quarter metre, and the reader says so while the float32 values are still
+    at hand; the same sweep near the origin reads silently."""
+    import warnings
+
+    from o3d_rpointhop.io import PrecisionWarning
+
+    rng = np.random.default_rng(5)
+    local = rng.uniform(-10, 10, (500, 4))
+    far = local + [512_345.0, 4_123_456.0, 87.0, 0.0]
+    far.astype("<f4").tofile(tmp_path / "far.bin")
+    local.astype("<f4").tofile(tmp_path / "near.bin")
+    with pytest.warns(PrecisionWarning, match="float32 resolves only 0.25"):
+        read_cloud(tmp_path / "far.bin")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_cloud(tmp_path / "near.bin")
+
+
+def test_float32_precision_is_judged_on_the_cloud_s_own_extent():
+    from o3d_rpointhop._utils.validation import coarse_float32
+
+    rng = np.random.default_rng(6)
+    small_far = (rng.uniform(0, 10, (200, 3)) + [4e6, 0.0, 0.0]).astype(np.float32)
+    wide_far = (rng.uniform(0, 1e6, (200, 3)) + [4e6, 0.0, 0.0]).astype(np.float32)
+    assert "float32 resolves only 0.25" in coarse_float32(small_far, "scan")
+    assert coarse_float32(wide_far, "scan") is None  # 0.25 m steps over 1000 km: fine
+    assert coarse_float32(small_far.astype(np.float64), "scan") is None  # not float32
+
+
 @pytest.mark.parametrize("suffix", [".obj", ".stl", ".off", ".gltf"])
 def test_meshes_are_sampled_by_area_with_their_normals(tmp_path, suffix):
     # A 4 x 1 x 1 box: its long faces hold 16 / 18 of the area.

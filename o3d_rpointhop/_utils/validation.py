@@ -17,6 +17,8 @@ __all__ = [
     "as_cloud_list",
     "as_viewpoints",
     "check_rigid_transformation",
+    "coarse_float32",
+    "PrecisionWarning",
     "is_open3d_cloud",
     "is_positive_number",
     "MAX_COORDINATE",
@@ -222,3 +224,36 @@ def check_rigid_transformation(value: Any, name: str = "init") -> np.ndarray:
     if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
         raise ValueError(f"{name}'s upper-left 3x3 block must be a rotation matrix")
     return arr
+
+
+class PrecisionWarning(UserWarning):
+    """Coordinates stored with less precision than the cloud needs (float32 at survey
+    offsets): the points were rounded before any computation could help."""
+
+
+#: float32 coordinates whose rounding step exceeds this share of the cloud's own extent
+#: were rounded too coarsely to register at full precision (survey coordinates).
+FLOAT32_RESOLUTION = 1e-5
+
+
+def coarse_float32(points32: np.ndarray, name: str) -> str | None:
+    """What is wrong with float32 coordinates too coarse for their cloud, or None.
+
+    The rounding step of float32 at the cloud's largest coordinate is compared with the
+    cloud's own extent (its largest side along an axis), so a small cloud far from the
+    origin (a scan in UTM coordinates) is caught, and a large one near it is not.
+    """
+    points32 = np.asarray(points32)
+    if points32.dtype != np.float32 or not len(points32):
+        return None
+    largest = float(np.abs(points32).max())
+    step = float(np.spacing(np.float32(largest)))
+    extent = float(np.ptp(points32.astype(np.float64), axis=0).max())
+    if step <= FLOAT32_RESOLUTION * extent:
+        return None
+    return (
+        f"{name} holds float32 coordinates up to {largest:.6g}, where float32 resolves "
+        f"only {step:.3g}, coarse for a cloud {extent:.3g} across: its points were "
+        "already rounded before registration; pass float64 (or coordinates relative to "
+        "a local origin) for full precision"
+    )

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from .._utils.validation import coarse_float32
+
 __all__ = ["RegistrationWarning", "check_geometry"]
 
 
@@ -20,8 +22,6 @@ class RegistrationWarning(UserWarning):
 # whose third is below it, a plane (relative standard deviations).
 _COLLINEAR = 1e-6
 _PLANAR = 1e-4
-# float32 coordinates whose rounding step exceeds this share of the cloud's extent.
-_FLOAT32_RESOLUTION = 1e-5
 
 
 def _raw_float32(cloud: Any) -> np.ndarray | None:
@@ -68,15 +68,6 @@ def check_geometry(points: np.ndarray, name: str, raw: Any = None) -> None:
             stacklevel=4,
         )
     raw32 = _raw_float32(raw)
-    if raw32 is not None:
-        step = float(np.spacing(np.float32(np.abs(raw32).max())))
-        extent = float(points.max(axis=0).max() - points.min(axis=0).min())
-        if step > _FLOAT32_RESOLUTION * extent:
-            warnings.warn(
-                f"{name} holds float32 coordinates up to {np.abs(raw32).max():.6g}, where "
-                f"float32 resolves only {step:.3g}, coarse for a cloud {extent:.3g} across: "
-                "its points were already rounded before registration; pass float64 "
-                "(or coordinates relative to a local origin) for full precision",
-                RegistrationWarning,
-                stacklevel=4,
-            )
+    problem = None if raw32 is None else coarse_float32(raw32, name)
+    if problem is not None:
+        warnings.warn(problem, RegistrationWarning, stacklevel=4)
