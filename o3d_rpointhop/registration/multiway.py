@@ -126,7 +126,41 @@ def _register_pair(
         transformation, fitness = context.to_world(local), None
     with repeatable_open3d():
         information = reg.get_information_matrix_from_point_clouds(*context.clouds(), edge, local)
-    return transformation, fitness, information
+    # In the coordinates the scans were given in, as the pose graph's edges are.
+    return transformation, fitness, information_about(np.asarray(information), context.origin)
+
+
+def information_about(information: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """An Open3D information matrix measured on clouds centred on ``origin``, expressed
+    for the same clouds in the coordinates they were centred from.
+
+    Open3D linearises a motion as ``p -> p + w x p + t`` (``w`` first, then ``t``); with
+    ``p = q + origin`` the same motion of the centred points ``q`` has ``t_q = t - origin
+    x w``, so the information transforms by that linear map. Without this, a pose graph
+    whose poses are in one frame and whose information matrices are in each pair's
+    centred frame weighs rotations by the wrong lever arm, badly so far from the origin.
+    """
+    change = np.eye(6)
+    x, y, z = np.asarray(origin, dtype=np.float64)
+    change[3:, :3] = -np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return change.T @ information @ change
+
+
+def _shifted(transformation: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """``transformation`` of coordinates centred on ``origin``, for the uncentred ones."""
+    out = np.array(transformation, dtype=np.float64)
+    out[:3, 3] += origin - out[:3, :3] @ origin
+    return out
+
+
+def _graph_about(graph, origin: np.ndarray):
+    """The pose graph of scans centred on ``origin``, in the scans' own coordinates."""
+    for node in graph.nodes:
+        node.pose = _shifted(np.asarray(node.pose), origin)
+    for edge in graph.edges:
+        edge.transformation = _shifted(np.asarray(edge.transformation), origin)
+        edge.information = information_about(np.asarray(edge.information), origin)
+    return graph
 
 
 def _full_normals(points: np.ndarray, settings: RegistrationSettings) -> np.ndarray:
@@ -232,6 +266,12 @@ def register_multiway(
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     views = as_viewpoints(viewpoints, len(points))
+    # One frame for the whole run, centred on scan 0: edges, information matrices and
+    # the optimisation stay well conditioned at survey coordinates, and a scan set gives
+    # the same edges and poses wherever it lies. Results go back at the end.
+    origin = points[0].mean(axis=0)
+    points = [p - origin for p in points]
+    views = [None if v is None else v - origin for v in views]
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
     global_method = resolve_global_method("auto", worker)
     if global_method not in GLOBAL_METHODS:
@@ -306,9 +346,11 @@ def register_multiway(
         tree = [e for e in tree if e in refined]
         graph, poses, kept = optimise(refined, tree, poses, settings)
     unconnected = [k for k, p in enumerate(poses) if p is None]
+    poses = [None if p is None else _shifted(p, origin) for p in poses]
+    pairs = {pair: (_shifted(t, origin), f) for pair, (t, f) in pairs.items()}
     return MultiwayResult(
         poses=poses,
-        pose_graph=graph,
+        pose_graph=_graph_about(graph, origin),
         pairs=pairs,
         edges=kept,
         unconnected=unconnected,

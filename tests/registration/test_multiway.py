@@ -24,6 +24,47 @@ def test_poses_of_a_synthetic_multiscan_object_are_recovered():
     assert set(result.pairs) == {(i, j) for i in range(4) for j in range(i + 1, 4)}
 
 
+def test_a_scan_set_at_survey_coordinates_gives_what_it_gives_at_the_origin():
+    """The same scans moved 6000 km from the origin: the same edges, and the same poses
+    once moved back, within rounding; its pose graph is in the scans' own coordinates."""
+    scans, truth = partial_views(4, seed=5)
+    offset = np.array([500_000.0, 6_000_000.0, 120.0])
+    near = register_multiway(scans, seed=0)
+    far = register_multiway([s + offset for s in scans], seed=0)
+    assert far.edges == near.edges and far.unconnected == near.unconnected == []
+    shift = np.eye(4)
+    shift[:3, 3] = offset
+    for k, (a, b) in enumerate(zip(near.poses, far.poses, strict=True)):
+        back = np.linalg.inv(shift) @ b @ shift
+        np.testing.assert_allclose(back[:3, :3], a[:3, :3], atol=1e-7)
+        np.testing.assert_allclose(back[:3, 3], a[:3, 3], atol=1e-5)
+        assert rotation_error_deg(a, truth[k]) < 2.0
+    for node, pose in zip(far.pose_graph.nodes, far.poses, strict=True):
+        np.testing.assert_allclose(np.asarray(node.pose), pose, atol=1e-6)
+
+
+def test_information_matrices_move_with_the_frame():
+    """information_about gives what Open3D measures on the uncentred clouds."""
+    import open3d as o3d
+
+    from o3d_rpointhop.registration.multiway import information_about
+
+    reg = o3d.pipelines.registration
+    centred = np.random.default_rng(0).normal(size=(400, 3))
+    origin = np.array([300.0, -200.0, 50.0])
+
+    def measured(points):
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        return np.asarray(
+            reg.get_information_matrix_from_point_clouds(cloud, cloud, 0.5, np.eye(4))
+        )
+
+    expected = measured(centred + origin)
+    np.testing.assert_allclose(
+        information_about(measured(centred), origin), expected, rtol=1e-12, atol=1e-6
+    )
+
+
 def test_parallel_pairs_give_the_same_poses():
     """Screening and refinement spread over processes: the same bytes as in one."""
     scans, _ = partial_views(3, seed=3)
