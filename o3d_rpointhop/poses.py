@@ -7,7 +7,8 @@ frame (or the target), as everywhere in this library and in Open3D.
 =================  ==============================================================
 format             one record
 =================  ==============================================================
-``"kitti"``        12 numbers: the top three rows of the matrix, row by row
+``"kitti"``        12 numbers: the top three rows of the matrix, row by row; line k
+                   is scan k, and a scan without a pose is a line of 12 ``nan``
 ``"tum"``          ``timestamp tx ty tz qx qy qz qw`` (a unit quaternion, scalar last)
 ``"3dmatch"``      a line ``i j n`` and the matrix's four rows (Choi et al.'s ``.log``)
 ``"matrix"``       one 4x4 matrix per file (``np.loadtxt``), what ``--init`` reads
@@ -54,11 +55,20 @@ def _check_pose(matrix: np.ndarray, where: str) -> np.ndarray:
     return matrix
 
 
-def _as_poses(poses: Sequence) -> list[np.ndarray]:
-    out = []
+def _as_poses(poses: Sequence, allow_missing: bool = False) -> list[np.ndarray | None]:
+    out: list[np.ndarray | None] = []
     for k, pose in enumerate(poses):
+        if pose is None and allow_missing:
+            out.append(None)
+            continue
+        if pose is None:
+            raise ValueError(
+                f"poses[{k}] is None: only KITTI files mark a scan without a pose (a line "
+                "of nan); TUM timestamps and 3DMatch pair ids name their scans, so leave "
+                "it out there"
+            )
         out.append(_check_pose(np.asarray(pose, dtype=np.float64), f"poses[{k}]"))
-    if not out:
+    if not any(p is not None for p in out):
         raise ValueError("no poses to write")
     return out
 
@@ -121,7 +131,8 @@ def write_poses(
     ----------
     path : path-like
     poses : sequence of array-like (4, 4)
-        Rigid transformations (ValueError otherwise).
+        Rigid transformations (ValueError otherwise). KITTI only: ``None`` for a scan
+        without a pose, written as a line of 12 ``nan`` so that line k stays scan k.
     format : {"kitti", "tum", "3dmatch"}, default="kitti"
     timestamps : sequence of float, default=None
         TUM only: one per pose (default: 0, 1, 2, ...).
@@ -133,11 +144,16 @@ def write_poses(
         3DMatch only: the third number of every header line (default: the number of
         poses).
     """
-    poses = _as_poses(poses)
+    poses = _as_poses(poses, allow_missing=format == "kitti")
     path = Path(path)
     lines = []
     if format == "kitti":
-        lines = [" ".join(f"{v:.9g}" for v in pose[:3].ravel()) for pose in poses]
+        lines = [
+            " ".join(["nan"] * 12)
+            if pose is None
+            else " ".join(f"{v:.9g}" for v in pose[:3].ravel())
+            for pose in poses
+        ]
     elif format == "tum":
         stamps = np.arange(len(poses), dtype=float) if timestamps is None else timestamps
         if len(stamps) != len(poses):
@@ -168,14 +184,23 @@ def read_poses(
     -------
     list of ndarray (4, 4), or dict
         KITTI and TUM: the poses in file order (TUM's timestamps are dropped; read
-        the first column with ``np.loadtxt`` for them). 3DMatch: ``{(i, j): pose}``.
+        the first column with ``np.loadtxt`` for them); a KITTI line of 12 ``nan`` (a
+        scan without a pose) reads as None. 3DMatch: ``{(i, j): pose}``.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     if format == "kitti":
         rows = _rows(path, 12)
-        poses = [np.vstack([r.reshape(3, 4), [0, 0, 0, 1]]) for r in rows]
+        missing = np.isnan(rows).all(axis=1)
+        if not (~missing).any():
+            raise ValueError(f"{path}: no poses in this file, only scans without one")
+        return [
+            None
+            if gone
+            else _check_pose(np.vstack([r.reshape(3, 4), [0, 0, 0, 1]]), f"{path}, pose {k}")
+            for k, (r, gone) in enumerate(zip(rows, missing, strict=True))
+        ]
     elif format == "tum":
         rows = _rows(path, 8)
         norms = np.linalg.norm(rows[:, 4:], axis=1)

@@ -243,3 +243,24 @@ def test_global_steps_keep_their_matches_in_the_caller_s_coordinates(tmp_path):
     np.testing.assert_array_equal(back.matches, step.matches)
     np.testing.assert_array_equal(back.match_inliers, step.match_inliers)
     assert result.steps[1].matches is None  # ICP matches no descriptors
+
+
+def test_kitti_keeps_a_line_for_a_scan_without_a_pose(tmp_path):
+    """Line k is scan k: a scan without a pose is a line of 12 nan, read back as None;
+    TUM and 3DMatch name their scans, so None is refused there; a line only partly nan is
+    damaged."""
+    turn = np.eye(4)
+    turn[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    write_poses(tmp_path / "k.txt", [np.eye(4), None, turn], "kitti")
+    assert (tmp_path / "k.txt").read_text().splitlines()[1] == " ".join(["nan"] * 12)
+    back = read_poses(tmp_path / "k.txt", "kitti")
+    assert back[1] is None
+    np.testing.assert_array_equal(back[2], turn)
+    for fmt in ("tum", "3dmatch"):
+        with pytest.raises(ValueError, match="only KITTI files mark a scan without a pose"):
+            write_poses(tmp_path / f"x.{fmt}", [np.eye(4), None], fmt)
+    with pytest.raises(ValueError, match="no poses to write"):
+        write_poses(tmp_path / "none.txt", [None, None], "kitti")
+    (tmp_path / "half.txt").write_text("nan " * 6 + "0 " * 6 + "\n")
+    with pytest.raises(ValueError, match="not a finite 4x4 matrix"):
+        read_poses(tmp_path / "half.txt", "kitti")

@@ -34,7 +34,10 @@ def add_parser(commands) -> None:
         "Scans no other scan overlaps are reported and left out (exit status 3).",
     )
     p.add_argument(
-        "scans", nargs="+", help="two or more scans (.ply, .las, .laz, .e57, .bin, .npy, ...)"
+        "scans",
+        nargs="+",
+        help="two or more scans (.ply, .las, .laz, .e57, .bin, .npy, ...), folders (every "
+        "scan file in them but .txt / .csv, by name) or quoted glob patterns",
     )
     p.add_argument("-o", "--output", required=True, help="merged cloud to write (.ply, ...)")
     p.add_argument("--poses", help="write the poses (scan -> scan 0), edges and flags as JSON")
@@ -44,7 +47,10 @@ def add_parser(commands) -> None:
         help="write the optimised pose graph in Open3D's JSON (open3d.io.read_pose_graph)",
     )
     p.add_argument(
-        "--trajectory", help="write the placed scans' poses (scan -> scan 0) as a trajectory"
+        "--trajectory",
+        help="write the scans' poses (scan -> scan 0) as a trajectory: KITTI keeps line k "
+        "for scan k (12 nan for an unplaced scan); TUM (timestamp k) and 3dmatch (pair "
+        "0 k) name each scan and leave unplaced ones out",
     )
     p.add_argument(
         "--trajectory-format",
@@ -63,12 +69,50 @@ def add_parser(commands) -> None:
     p.add_argument(
         "--colour-by-scan", action="store_true", help="paint each scan in its own colour"
     )
-    p.add_argument("--n-jobs", type=int, help="parallel pair registrations")
+    p.add_argument(
+        "--n-jobs",
+        type=int,
+        default=-1,
+        help="parallel pair registrations (default -1: every core; the poses do not depend on it)",
+    )
     add_viewpoints(p, "scan")
     add_seed(p)
     add_force(p)
     add_view(p)
     p.set_defaults(func=run)
+
+
+def scan_paths(inputs: list[str]) -> list[str]:
+    """The scan files the inputs name: a file as given; a folder, every file in it whose
+    extension ``read_cloud`` reads as points (text tables left out: a folder of scans
+    often holds notes or poses too), sorted by name; a pattern with ``*``, ``?`` or
+    ``[`` that is not a file, the files it matches, sorted. CommandError for a folder
+    or pattern that names no scan."""
+    import glob
+
+    from ..io import READ_FORMATS
+
+    suffixes = {s for s in READ_FORMATS if s not in (".txt", ".csv")}
+    out = []
+    for item in inputs:
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(
+                str(p) for p in path.iterdir() if p.is_file() and p.suffix.lower() in suffixes
+            )
+            if not found:
+                raise CommandError(
+                    f"{item}: a folder without scan files ({', '.join(sorted(suffixes))})"
+                )
+            out += found
+        elif not path.exists() and any(c in item for c in "*?["):
+            found = sorted(p for p in glob.glob(item) if Path(p).is_file())
+            if not found:
+                raise CommandError(f"{item}: no file matches this pattern")
+            out += found
+        else:
+            out.append(item)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,6 +126,9 @@ def run(args: argparse.Namespace) -> int:
     for out in outputs:
         if out:
             check_output_path(out)
+    args.scans = scan_paths(args.scans)
+    if len(args.scans) < 2:
+        raise CommandError(f"reconstruct needs two or more scans, got {len(args.scans)}")
     scans = [read_cloud(p) for p in args.scans]
     result = register_multiway(
         scans,
@@ -100,7 +147,11 @@ def run(args: argparse.Namespace) -> int:
     if args.pose_graph:
         write_pose_graph(args.pose_graph, result.pose_graph)
     if args.trajectory:
-        placed = [k for k, pose in enumerate(result.poses) if pose is not None]
+        # Line k is scan k in KITTI (a line of nan for an unplaced scan); TUM's
+        # timestamp k and the .log's pair (0, k) name the scan, so unplaced ones are
+        # left out there.
+        kitti = args.trajectory_format == "kitti"
+        placed = [k for k, pose in enumerate(result.poses) if kitti or pose is not None]
         write_poses(
             args.trajectory,
             [result.poses[k] for k in placed],

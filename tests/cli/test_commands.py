@@ -59,6 +59,41 @@ def test_reconstruct_command(tmp_path, capsys):
     assert "unconnected (left out)" in capsys.readouterr().err
 
 
+def test_reconstruct_reads_folders_and_patterns_and_keeps_line_k_for_scan_k(tmp_path, capsys):
+    """A folder of scans (with a note beside them) and a quoted pattern give the same
+    scans by name; with a scan of something else among them, the KITTI trajectory keeps
+    one line per scan, that scan's a line of nan, while TUM leaves it out."""
+    from o3d_rpointhop.cli import EXIT_UNRELIABLE
+    from o3d_rpointhop.poses import read_poses
+
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    scans, _ = partial_views(3, seed=1)
+    np.save(folder / "a0.npy", scans[0])
+    np.save(folder / "b1.npy", make_object(1700, shape_seed=77) * 0.8 + 0.3)  # no overlap
+    np.save(folder / "c2.npy", scans[1])
+    np.save(folder / "d3.npy", scans[2])
+    (folder / "notes.txt").write_text("scanned on a Tuesday\n")
+    kitti, tum = tmp_path / "poses.txt", tmp_path / "poses.tum"
+    common = ["-o", str(tmp_path / "m.ply"), "--poses", str(tmp_path / "p.json")]
+    status = main(["reconstruct", str(folder), *common, "--trajectory", str(kitti)])
+    assert status == EXIT_UNRELIABLE
+    summary = json.loads((tmp_path / "p.json").read_text())
+    assert summary["unconnected"] == [str(folder / "b1.npy")]
+    poses = read_poses(kitti, "kitti")
+    assert len(poses) == 4 and poses[1] is None
+    assert all(p is not None for k, p in enumerate(poses) if k != 1)
+    np.testing.assert_array_equal(poses[0], np.eye(4))
+    assert kitti.read_text().splitlines()[1] == " ".join(["nan"] * 12)
+    pattern = str(folder / "[acd]*.npy")
+    args = ["reconstruct", pattern, *common, "--trajectory", str(tum), "--trajectory-format", "tum"]
+    assert main(args) == 0
+    assert np.loadtxt(tum)[:, 0].tolist() == [0.0, 1.0, 2.0]
+    capsys.readouterr()
+    assert main(["reconstruct", str(tmp_path / "nothing*.ply"), *common]) == 1
+    assert "no file matches this pattern" in capsys.readouterr().err
+
+
 def test_fit_then_describe(tmp_path, capsys):
     clouds = [
         write_points(tmp_path / f"c{i}.ply", make_object(300, shape_seed=i)) for i in range(3)
