@@ -24,6 +24,7 @@ from ._common import (
     MAX_OUTPUT_BYTES,
     PROG,
     CommandError,
+    UsageError,
 )
 
 __all__ = [
@@ -95,6 +96,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except UsageError as exc:
+        if args.debug:
+            raise
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except Exception as exc:
         if args.debug:
             raise

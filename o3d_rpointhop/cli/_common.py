@@ -19,7 +19,8 @@ EXIT_CODES = f"""exit status:
      file, NaN coordinates, too few points, degenerate geometry, an output that exists
      as a folder or exceeds the size limit without --force; one line on stderr says which
      (--debug shows the traceback instead)
-  {EXIT_USAGE}  usage error (unknown option, bad value)
+  {EXIT_USAGE}  usage error (unknown option, bad value, a --config / --set setting refused;
+     checked before any input is read)
   {EXIT_UNRELIABLE}  register/demo finished, but the result is flagged: not converged (no
      overlap, or a chance alignment) or ambiguous (a symmetric shape); reconstruct
      finished with unconnected scans left out; outputs are written, and stderr says
@@ -32,6 +33,12 @@ DESCRIPTORS = ("rpointhop", "fpfh")
 
 class CommandError(Exception):
     """A failure to report as one line on stderr with exit status 1."""
+
+
+class UsageError(CommandError):
+    """A bad option or setting (an unknown section or parameter, a value the step
+    refuses), reported as one line on stderr with exit status 2, before any input is
+    read."""
 
 
 def check_size(

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ._common import CommandError
+from ._common import CommandError, UsageError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -61,9 +61,9 @@ def default_config() -> dict[str, dict[str, Any]]:
 
 def _merge(config: dict, defaults: dict, section: str, key: str, value: Any, where: str) -> None:
     if section not in defaults:
-        raise CommandError(f"{where}: unknown section [{section}]; sections: {', '.join(defaults)}")
+        raise UsageError(f"{where}: unknown section [{section}]; sections: {', '.join(defaults)}")
     if key not in defaults[section]:
-        raise CommandError(
+        raise UsageError(
             f"{where}: [{section}] has no parameter {key!r}; it has: "
             f"{', '.join(sorted(defaults[section]))}"
         )
@@ -93,7 +93,7 @@ def load_config(path: str | None, sets: list[str] | None = None) -> dict[str, di
         name, sep, text = item.partition("=")
         section, dot, key = name.strip().partition(".")
         if not (sep and dot and key):
-            raise CommandError(f"--set {item!r}: expected section.parameter=value")
+            raise UsageError(f"--set {item!r}: expected section.parameter=value")
         try:  # a TOML value (numbers, true/false, quoted strings, arrays) or a bare word
             value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:
@@ -155,23 +155,32 @@ def registration_options(
             return None
         if name not in steps:
             return name  # register() names an unknown step in its error
-        return steps[name](**config.get(name, {}))
+        step = steps[name](**config.get(name, {}))
+        try:  # every value checked now, before any cloud is read
+            step._validate_params()
+        except (ValueError, TypeError) as exc:
+            raise UsageError(f"[{name}]: {exc}") from None
+        return step
 
     refine = register["refine"]
     chain = [refine] if isinstance(refine, str) else list(refine)
     chain = [build(r) for r in chain if r not in (None, "none")]
     if register["symmetry_check"]:
         if not chain:
-            raise CommandError("--symmetry-check needs an ICP refinement (--refine)")
+            raise UsageError("--symmetry-check needs an ICP refinement (--refine)")
         from ..registration import SymmetryCheck
 
         chain.append(SymmetryCheck(refine=clone(chain[-1]), **config.get("symmetry_check", {})))
     settings = config.get("settings")
+    try:
+        settings = RegistrationSettings(**settings) if settings else None
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"[settings]: {exc}") from None
     return {
         "global_method": build(register["global_method"]),
         "refine": chain or None,
         "voxel_size": register["voxel_size"],
         "n_global_points": register["n_global_points"],
         "seed": register["seed"],
-        "settings": RegistrationSettings(**settings) if settings else None,
+        "settings": settings,
     }

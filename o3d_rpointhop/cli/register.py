@@ -102,13 +102,8 @@ def run(args: argparse.Namespace) -> int:
     from ..poses import read_matrix
     from ..registration import RegistrationWarning, register
 
-    source = read_cloud(args.source)
-    target = read_cloud(args.target)
-    for out in (args.output, args.transform, args.result):
-        if out:
-            check_output_path(out)
+    # Settings, model and outputs are checked before any cloud is read.
     descriptor = descriptor_of(args)
-    init = read_matrix(args.init) if args.init else None
     flags = {
         "global_method": args.global_method,
         "refine": args.refine,
@@ -119,6 +114,12 @@ def run(args: argparse.Namespace) -> int:
     }
     config = load_config(args.config, args.set)
     options = registration_options(config, flags, descriptor)
+    for out in (args.output, args.transform, args.result):
+        if out:
+            check_output_path(out)
+    init = read_matrix(args.init) if args.init else None
+    source = read_cloud(args.source)
+    target = read_cloud(args.target)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RegistrationWarning)  # reported below, once

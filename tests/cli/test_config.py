@@ -71,21 +71,27 @@ def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pai
 
 
 @pytest.mark.parametrize(
-    "extra, message",
+    "extra, message, status",
     [
-        (["--set", "ransac.max_iterations=10"], "[ransac] has no parameter 'max_iterations'"),
-        (["--set", "icp.max_iteration=10"], "unknown section [icp]"),
-        (["--set", "max_iteration=10"], "expected section.parameter=value"),
-        (["--set", "ransac.max_iteration=-5"], "max_iteration"),
-        (["--config", "missing.toml"], "no such config file"),
+        (["--set", "ransac.max_iterations=10"], "[ransac] has no parameter 'max_iterations'", 2),
+        (["--set", "icp.max_iteration=10"], "unknown section [icp]", 2),
+        (["--set", "max_iteration=10"], "expected section.parameter=value", 2),
+        (["--set", "ransac.max_iteration=-5"], "[ransac]: The 'max_iteration' parameter", 2),
+        (["--set", "ransac.max_iteration=abc"], "[ransac]: The 'max_iteration' parameter", 2),
+        (["--set", "settings.icp_factors=[]"], "[settings]:", 2),
+        (["--config", "missing.toml"], "no such config file", EXIT_ERROR),
     ],
 )
-def test_bad_settings_get_one_line(tmp_path, monkeypatch, capsys, pair, extra, message):
+def test_bad_settings_get_one_line(tmp_path, monkeypatch, capsys, pair, extra, message, status):
+    """Settings are checked before the clouds are read: a bad one is reported even when
+    the clouds do not exist; a bad value is a usage error (exit status 2)."""
     monkeypatch.chdir(tmp_path)
     _, _, files = pair
-    assert main(["register", *files, *extra]) == EXIT_ERROR
+    assert main(["register", *files, *extra]) == status
     err = capsys.readouterr().err
     assert err.startswith("o3d-rpointhop: error:") and message in err
+    assert main(["register", "no_such.ply", "no_such_either.ply", *extra]) == status
+    assert message in capsys.readouterr().err
 
 
 def test_model_object_runs_what_the_default_runs(capsys, pair):
