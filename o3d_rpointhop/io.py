@@ -161,12 +161,20 @@ def _unit_colors(channels: list[np.ndarray]) -> np.ndarray | None:
     return rgb / (255.0 if top <= 255 else 65535.0)
 
 
+def _first_line(exc: BaseException) -> str:
+    """A reader library's error in one line (libE57 appends its call stack)."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return lines[0] if lines else type(exc).__name__
+
+
 def _read_las(path: Path) -> o3d.geometry.PointCloud:
     laspy = _optional("laspy", path.suffix.lower())
     try:
         las = laspy.read(str(path))
     except Exception as exc:  # laspy raises its own errors, and OSError/ValueError
-        raise ValueError(f"{path}: damaged or unreadable {path.suffix} file ({exc})") from None
+        raise ValueError(
+            f"{path}: damaged or unreadable {path.suffix} file ({_first_line(exc)})"
+        ) from None
     # Scaled coordinates in float64: survey offsets keep their millimetres.
     points = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
     names = set(las.point_format.dimension_names)
@@ -185,7 +193,7 @@ def _read_e57(path: Path) -> o3d.geometry.PointCloud:
             for k in range(e57.scan_count)
         ]
     except Exception as exc:  # libE57's errors come as its own exception type
-        raise ValueError(f"{path}: damaged or unreadable .e57 file ({exc})") from None
+        raise ValueError(f"{path}: damaged or unreadable .e57 file ({_first_line(exc)})") from None
     if not scans:
         raise ValueError(f"{path}: no scans in this .e57 file")
     parts, colors = [], []

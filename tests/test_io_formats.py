@@ -95,6 +95,21 @@ def test_kitti_sweeps_are_read_and_partial_records_refused(tmp_path):
         read_cloud(tmp_path / "cut.bin")
 
 
+def test_a_damaged_e57_is_one_line(tmp_path):
+    pye57 = pytest.importorskip("pye57")
+    with pye57.E57(str(tmp_path / "a.e57"), mode="w") as e57:
+        points = make_object(500, shape_seed=1)
+        e57.write_scan_raw(
+            {"cartesianX": points[:, 0], "cartesianY": points[:, 1], "cartesianZ": points[:, 2]}
+        )
+    whole = (tmp_path / "a.e57").read_bytes()
+    (tmp_path / "cut.e57").write_bytes(whole[:5000] + b"\0" * (len(whole) - 5000))
+    with pytest.raises(ValueError) as caught:
+        read_cloud(tmp_path / "cut.e57")
+    message = str(caught.value)
+    assert "damaged or unreadable .e57 file" in message and "\n" not in message
+
+
 def test_a_kitti_sweep_too_coarse_for_its_size_says_so_when_read(tmp_path):
     """float32 is the format's precision: a 20 m sweep stored at UTM coordinates is
     rounded to a quarter metre, and the reader says so while the float32 values are still

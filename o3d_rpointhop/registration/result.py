@@ -48,8 +48,11 @@ def read_json(path: str | os.PathLike, kind: str) -> dict:
     """The body of a file :func:`write_json` wrote as ``kind``; ValueError otherwise."""
     try:
         body = json.loads(Path(path).read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: not a saved result ({exc})") from None
+    except json.JSONDecodeError as exc:
+        where = "cut short" if exc.pos >= len(exc.doc.rstrip()) else f"damaged at line {exc.lineno}"
+        raise ValueError(f"{path}: not a readable saved result (JSON {where}: {exc.msg})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a saved result (not UTF-8 text)") from None
     if not isinstance(body, dict) or body.get("kind") != kind:
         found = body.get("kind") if isinstance(body, dict) else None
         raise ValueError(f"{path}: not a saved {kind} (found {found!r})")
