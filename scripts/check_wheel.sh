@@ -1,7 +1,7 @@
 #!/bin/sh
 # Packaging check: build a wheel from this checkout, install it (not editable, with the
 # [plot] extra the demo draws with) in a fresh virtual environment, and from outside the
-# checkout load both shipped models and run the demo. Needs .venv (scripts/setup.sh);
+# checkout load the shipped models and run the demo. Needs .venv (scripts/setup.sh);
 # dependencies come from pip's cache when setup.sh has filled it.
 set -eu
 cd "$(dirname "$0")/.."
@@ -27,10 +27,11 @@ from o3d_rpointhop import RPointHopTransformer
 where = pathlib.Path(o3d_rpointhop.__file__).resolve()
 assert "site-packages" in where.parts, f"imported from {where}, not from the wheel"
 full = RPointHopTransformer.pretrained()
+objects = RPointHopTransformer.pretrained("object")
 scene = RPointHopTransformer.pretrained("scene")
-assert (full.n_features_out_, scene.n_features_out_) == (1624, 96)
+assert (full.n_features_out_, objects.n_features_out_, scene.n_features_out_) == (1624, 24, 96)
 assert (where.parent / "py.typed").is_file(), "py.typed is not in the wheel"
-print(f"wheel check: both models load from {where.parent}")
+print(f"wheel check: the three shipped models load from {where.parent}")
 
 # The compiled consensus kernels compile (or load from numba's cache) from the wheel.
 import numpy as np
