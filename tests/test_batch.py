@@ -49,6 +49,7 @@ def test_register_many_names_a_bad_pair(clouds):
         register_many([(clouds[0], np.full((50, 3), np.nan))])
 
 
+@pytest.mark.slow
 def test_batch_api_runs_on_a_dask_localcluster(model, clouds):
     distributed = pytest.importorskip("distributed")
     from joblib import parallel_config

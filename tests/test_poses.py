@@ -137,9 +137,10 @@ def test_registration_results_round_trip(tmp_path):
     with pytest.raises(ValueError, match="not a readable saved result"):
         RegistrationResult.load(tmp_path / "text.json")
     saved = (tmp_path / "r.json").read_text()
-    (tmp_path / "cut.json").write_text(saved[: len(saved) // 2])
-    with pytest.raises(ValueError, match=r"JSON cut short"):
-        RegistrationResult.load(tmp_path / "cut.json")
+    for cut in (len(saved) // 3, len(saved) // 2, len(saved) - 2):  # inside any token
+        (tmp_path / "cut.json").write_text(saved[:cut])
+        with pytest.raises(ValueError, match=r"JSON cut short"):
+            RegistrationResult.load(tmp_path / "cut.json")
 
 
 def test_evaluate_scores_a_given_transformation_like_open3d():

@@ -24,6 +24,7 @@ def test_modelnet40_loader(modelnet):
     assert train.class_names[0] == "airplane" and len(train.class_names) == 40
 
 
+@pytest.mark.slow
 def test_rpointhop_beats_fpfh_on_resampled_modelnet_pairs(modelnet):
     """The descriptor-quality protocol of docs/performance.md on 10 test shapes."""
     from scipy.spatial.transform import Rotation
@@ -140,6 +141,7 @@ def test_symmetry_check_puts_right_the_turned_over_shapes_of_the_noisy_protocol(
         assert checked.fitness >= plain.fitness
 
 
+@pytest.mark.slow
 def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
     from o3d_rpointhop.evaluation.report import write_report
     from o3d_rpointhop.evaluation.threedmatch import run_3dmatch

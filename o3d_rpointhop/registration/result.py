@@ -49,7 +49,10 @@ def read_json(path: str | os.PathLike, kind: str) -> dict:
     try:
         body = json.loads(Path(path).read_text())
     except json.JSONDecodeError as exc:
-        where = "cut short" if exc.pos >= len(exc.doc.rstrip()) else f"damaged at line {exc.lineno}"
+        # A saved result is one JSON object: text that does not close it was cut short.
+        text = exc.doc.rstrip()
+        cut = text.startswith("{") and not text.endswith("}")
+        where = "cut short" if cut else f"damaged at line {exc.lineno}"
         raise ValueError(f"{path}: not a readable saved result (JSON {where}: {exc.msg})") from None
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a saved result (not UTF-8 text)") from None

@@ -7,6 +7,7 @@ import json
 import pytest
 
 
+@pytest.mark.slow
 @pytest.mark.realdata
 def test_benchmark_command_writes_json_markdown_and_plots(shared_data, tmp_path, capsys):
     from o3d_rpointhop.cli import main

@@ -15,6 +15,7 @@ from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.io import read_cloud
 
 
+@pytest.mark.slow
 def test_reconstruct_command(tmp_path, capsys):
     import json
 

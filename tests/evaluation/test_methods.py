@@ -66,6 +66,7 @@ NO_CLAIMS = {
 }
 
 
+@pytest.mark.slow
 def test_every_method_runs(shapes):
 
     model = RPointHopTransformer().fit(list(shapes[:, :1024]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop.datasets import make_object
@@ -11,6 +12,7 @@ from o3d_rpointhop.registration.prepared import common_voxel
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg, translation_error
 
 
+@pytest.mark.slow
 def test_the_recipe_places_moved_copies_in_the_first_scans_frame():
     clouds, truth = [], []
     for k in range(3):

@@ -13,6 +13,8 @@ from helpers import free_port, random_motion
 from o3d_rpointhop import register, register_multiway
 from o3d_rpointhop.datasets import make_object
 
+pytestmark = pytest.mark.slow
+
 pytest.importorskip("viser")
 sync_api = pytest.importorskip("playwright.sync_api")
 CHROMIUM = shutil.which("chromium")

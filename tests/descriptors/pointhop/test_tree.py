@@ -192,6 +192,7 @@ def test_run_blocks_cuts_at_multiples_of_the_alignment():
 
 
 # ----------------------------------------------------------------------------- memory
+@pytest.mark.slow
 def test_describing_holds_little_beyond_the_output():
     """Peak resident memory of describing 100k points, over the process's peak after
     describing a small cloud (libraries and compiled kernels loaded): about 1.5 kB per
