@@ -7,12 +7,28 @@ the private ``sklearn.utils._param_validation``; importing them here, and only h
 keeps a move in a future scikit-learn to one line.
 """
 
+from collections.abc import Callable
+from typing import Any, TypeVar
+
 from sklearn.utils._param_validation import (
     HasMethods,
     Interval,
     InvalidParameterError,
     StrOptions,
-    validate_params,
 )
+from sklearn.utils._param_validation import validate_params as _validate_params
 
 __all__ = ["HasMethods", "Interval", "InvalidParameterError", "StrOptions", "validate_params"]
+
+_Function = TypeVar("_Function", bound=Callable[..., Any])
+
+
+def validate_params(
+    parameter_constraints: dict, *, prefer_skip_nested_validation: bool
+) -> Callable[[_Function], _Function]:
+    """scikit-learn's ``validate_params``, typed: the function it decorates keeps its
+    signature and return type for type checkers (scikit-learn's own decorator is
+    untyped, so ``register()`` would read as ``Any``)."""
+    return _validate_params(
+        parameter_constraints, prefer_skip_nested_validation=prefer_skip_nested_validation
+    )
