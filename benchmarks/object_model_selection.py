@@ -69,6 +69,23 @@ def _fit(params: dict, n_components: int | None, shapes: np.ndarray) -> RPointHo
     return model.fit(list(shapes))
 
 
+def _on_folds(method, models, shapes, folds, protocol, seed, voxel_of, label):
+    """``method`` on the pairs of each fold (the model fitted on the other fold, or
+    None), tallied over both: ``(seconds per pair, successes, successes up to
+    symmetry)``."""
+    seconds, ok, sym = [], 0, 0
+    for k, test in enumerate(folds):
+        pairs = make_pairs(shapes[test], protocol, seed + k)
+        bar = Progress(len(pairs), f"{label} {protocol} fold {k}", True)
+        summary, records = evaluate_methods(
+            pairs, [method], models[k], voxel_of, seed, bar, shapes[test]
+        )
+        seconds += [r.seconds for r in records[method]]
+        ok += round(summary[method]["success_rate"] * len(pairs))
+        sym += round(summary[method]["success_rate_up_to_symmetry"] * len(pairs))
+    return seconds, ok, sym
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--data", default=None)
@@ -98,26 +115,20 @@ def main() -> None:
         "candidates": {},
         "peer": {},
     }
-    peer_seconds: dict[str, list[float]] = {p: [] for p in protocols}
     # What made the run: the peer's entry, then one per candidate (both folds' models).
     out["provenance"] = run_provenance([PEER], None)
+    common = (shapes, folds)
     with thread_budget("one"):
         # The peer once per pair, first: its times are the ratios' denominators.
         for protocol in protocols:
-            for k, test in enumerate(folds):
-                pairs = make_pairs(shapes[test], protocol, args.seed + k)
-                bar = Progress(len(pairs), f"{PEER} {protocol} fold {k}", True)
-                summary, records = evaluate_methods(
-                    pairs, [PEER], None, voxel_of, args.seed, bar, shapes[test]
-                )
-                peer_seconds[protocol] += [r.seconds for r in records[PEER]]
-                entry = out["peer"].setdefault(protocol, {"successes": 0, "symmetric": 0})
-                entry["successes"] += round(summary[PEER]["success_rate"] * len(pairs))
-                entry["symmetric"] += round(
-                    summary[PEER]["success_rate_up_to_symmetry"] * len(pairs)
-                )
-        for protocol in protocols:
-            out["peer"][protocol]["median_seconds"] = float(np.median(peer_seconds[protocol]))
+            seconds, ok, sym = _on_folds(
+                PEER, [None, None], *common, protocol, args.seed, voxel_of, PEER
+            )
+            out["peer"][protocol] = {
+                "successes": ok,
+                "symmetric": sym,
+                "median_seconds": float(np.median(seconds)),
+            }
         for name in names:
             params, n_components = CANDIDATES[name]
             entry = {
@@ -138,16 +149,9 @@ def main() -> None:
                 "descriptor": {"per_fold": [model_identity(m) for m in models]},
             }
             for protocol in protocols:
-                seconds, ok, sym = [], 0, 0
-                for k, test in enumerate(folds):
-                    pairs = make_pairs(shapes[test], protocol, args.seed + k)
-                    bar = Progress(len(pairs), f"{name} {protocol} fold {k}", True)
-                    summary, records = evaluate_methods(
-                        pairs, [METHOD], models[k], voxel_of, args.seed, bar, shapes[test]
-                    )
-                    seconds += [r.seconds for r in records[METHOD]]
-                    ok += round(summary[METHOD]["success_rate"] * len(pairs))
-                    sym += round(summary[METHOD]["success_rate_up_to_symmetry"] * len(pairs))
+                seconds, ok, sym = _on_folds(
+                    METHOD, models, *common, protocol, args.seed, voxel_of, name
+                )
                 median = float(np.median(seconds))
                 entry["protocols"][protocol] = {
                     "pairs": len(seconds),

@@ -11,6 +11,7 @@ __all__ = [
     "rotation_error_deg",
     "translation_error",
     "rms_displacement",
+    "from_centred",
     "euler_angles_deg",
     "random_rigid_motion",
 ]
@@ -141,6 +142,15 @@ def translation_error(
     if about is not None:
         gap = gap + (estimate[:3, :3] - truth[:3, :3]) @ np.asarray(about, dtype=np.float64)
     return float(np.linalg.norm(gap))
+
+
+def from_centred(transformation: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """A transformation of coordinates centred on ``centre`` (``x - centre``), for the
+    coordinates they were centred from: ``x -> R (x - c) + t + c``. A new float64 array;
+    ``from_centred(T, -centre)`` goes the other way."""
+    out = np.array(transformation, dtype=np.float64)
+    out[:3, 3] += centre - out[:3, :3] @ centre
+    return out
 
 
 def rms_displacement(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) -> float:

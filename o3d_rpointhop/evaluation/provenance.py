@@ -227,11 +227,11 @@ def multiway_provenance(methods) -> dict:
     from ..registration.defaults import default_descriptor
 
     kinds = {
-        "rpointhop": lambda: model_identity(default_descriptor()),
+        "rpointhop": default_descriptor,
         "fpfh": _FEATURES["fpfh"],
         "open3d-recipe": _FEATURES["open3d-fpfh"],
     }
-    return {**_run_facts(), "methods": {name: {"descriptor": kinds[name]()} for name in methods}}
+    return descriptor_provenance({name: kinds[name]() for name in methods})
 
 
 def _methods_of(results: dict) -> set[str]:

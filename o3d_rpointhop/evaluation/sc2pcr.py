@@ -37,7 +37,7 @@ from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
 from ..registration.steps import ConsensusGlobal
 from ..registration.steps._consensus import compatibility_graphs, consensus_sets
-from ..transforms import rigid_transforms
+from ..transforms import from_centred, rigid_transforms
 
 __all__ = ["SC2PCRGlobal", "sc2pcr"]
 
@@ -232,8 +232,7 @@ def sc2pcr(
     transformation = np.eye(4)
     transformation[:3, :3], transformation[:3, 3] = rot[best], shift[best]
     transformation = _refined(transformation, source, target, inlier_threshold, refinements)
-    transformation[:3, 3] += centre - transformation[:3, :3] @ centre
-    return transformation, len(seeds)
+    return from_centred(transformation, centre), len(seeds)
 
 
 class SC2PCRGlobal(ConsensusGlobal):

@@ -17,6 +17,7 @@ from .._utils.geometry import point_spacing
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_viewpoints
 from ..open3d_interop import to_point_cloud
+from ..transforms import from_centred
 from .checks import check_geometry
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
 from .prepared import PreparedCloud, estimate_normals
@@ -159,15 +160,11 @@ class RegistrationContext:
 
     def to_world(self, transformation: np.ndarray) -> np.ndarray:
         """A centred-frame transformation in the caller's coordinates."""
-        out = np.array(transformation, dtype=np.float64)
-        out[:3, 3] += self.origin - out[:3, :3] @ self.origin
-        return out
+        return from_centred(transformation, self.origin)
 
     def to_local(self, transformation: np.ndarray) -> np.ndarray:
         """A caller's transformation in the centred frame (inverse of :meth:`to_world`)."""
-        out = np.array(transformation, dtype=np.float64)
-        out[:3, 3] -= self.origin - out[:3, :3] @ self.origin
-        return out
+        return from_centred(transformation, -self.origin)
 
     def cloud(self, which: str) -> o3d.geometry.PointCloud:
         """The full-resolution ``"source"`` or ``"target"``."""

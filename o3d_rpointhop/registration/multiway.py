@@ -30,6 +30,7 @@ from .._utils.parallel import parallel_map, single_threaded
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints
+from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method, resolve_global_points
@@ -146,19 +147,12 @@ def information_about(information: np.ndarray, origin: np.ndarray) -> np.ndarray
     return change.T @ information @ change
 
 
-def _shifted(transformation: np.ndarray, origin: np.ndarray) -> np.ndarray:
-    """``transformation`` of coordinates centred on ``origin``, for the uncentred ones."""
-    out = np.array(transformation, dtype=np.float64)
-    out[:3, 3] += origin - out[:3, :3] @ origin
-    return out
-
-
 def _graph_about(graph, origin: np.ndarray):
     """The pose graph of scans centred on ``origin``, in the scans' own coordinates."""
     for node in graph.nodes:
-        node.pose = _shifted(np.asarray(node.pose), origin)
+        node.pose = from_centred(np.asarray(node.pose), origin)
     for edge in graph.edges:
-        edge.transformation = _shifted(np.asarray(edge.transformation), origin)
+        edge.transformation = from_centred(np.asarray(edge.transformation), origin)
         edge.information = information_about(np.asarray(edge.information), origin)
     return graph
 
@@ -346,8 +340,8 @@ def register_multiway(
         tree = [e for e in tree if e in refined]
         graph, poses, kept = optimise(refined, tree, poses, settings)
     unconnected = [k for k, p in enumerate(poses) if p is None]
-    poses = [None if p is None else _shifted(p, origin) for p in poses]
-    pairs = {pair: (_shifted(t, origin), f) for pair, (t, f) in pairs.items()}
+    poses = [None if p is None else from_centred(p, origin) for p in poses]
+    pairs = {pair: (from_centred(t, origin), f) for pair, (t, f) in pairs.items()}
     return MultiwayResult(
         poses=poses,
         pose_graph=_graph_about(graph, origin),

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..._utils.compiled import kernel, popcount
 from ..._utils.threads import run_blocks
-from ...transforms import rigid_transform, rigid_transforms
+from ...transforms import from_centred, rigid_transform, rigid_transforms
 from ._refit import refit_while_growing
 
 __all__ = [
@@ -472,8 +472,7 @@ def consensus(
         )
     else:  # no hypothesis, or none the up prior allows: no estimate
         inliers = _within(transformation, source, target, sq_inlier)
-    # Back from the centred frame: x -> R (x - c) + t + c.
-    transformation[:3, 3] += centre - transformation[:3, :3] @ centre
+    transformation = from_centred(transformation, centre)  # back from the centred frame
     return ConsensusResult(
         transformation=transformation, inliers=inliers, n_hypotheses=len(seeds), seeds=seeds
     )

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..._utils.cells import CellGrid
 from ..._utils.compiled import kernel
-from ...transforms import rigid_transform, rigid_transforms
+from ...transforms import from_centred, rigid_transform, rigid_transforms
 from ._refit import refit_while_growing
 
 __all__ = ["RansacResult", "ransac"]
@@ -294,6 +294,5 @@ def ransac(
         _residuals(transformation[None, :3, :3], transformation[None, :3, 3], *planes)[0]
         < sq_threshold
     )
-    # Back from the centred frame: x -> R (x - c) + t + c.
-    transformation[:3, 3] += centre - transformation[:3, :3] @ centre
+    transformation = from_centred(transformation, centre)  # back from the centred frame
     return RansacResult(transformation=transformation, inliers=inliers, iterations=drawn)
