@@ -137,7 +137,9 @@ def run_3dmatch(
             "viewpoints": viewpoints,
             "pairs_per_benchmark": "all" if max_pairs is None else f"at most {max_pairs}",
             "source_turned": rotate,
-            **model_facts(model),
+            # The benchmark's own model is described only when a method uses it: the
+            # scene methods' models are named in the provenance.
+            **(model_facts(model) if "given" in uses else {}),
             **machine_facts(),
             "model_training_scenes": sorted(seen),
         },
