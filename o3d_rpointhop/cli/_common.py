@@ -87,6 +87,12 @@ def auto_or(convert, what: str, valid, problem: str):
     return parse
 
 
+#: ``--voxel-size``: "auto" or a positive length.
+positive_or_auto = auto_or(float, "a number", lambda v: v > 0, "voxel size must be positive")
+#: ``--n-global-points``: "auto" or a count of at least 3.
+global_points = auto_or(int, "a count", lambda v: v >= 3, "need at least 3 global points")
+
+
 # --------------------------------------------------------------------------- options
 def add_model(parser: argparse.ArgumentParser, default: str) -> None:
     """``--model``: a model file, or a shipped model by name."""
@@ -102,8 +108,7 @@ def add_descriptor(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--descriptor",
         choices=DESCRIPTORS,
-        default=DESCRIPTORS[0],
-        help="rpointhop (the model of --model) or fpfh (radii from the resolution)",
+        help="rpointhop (the model of --model; the default) or fpfh (radii from the resolution)",
     )
 
 
@@ -200,21 +205,19 @@ def load_model(name: str | None, n_components: int | None = None):
     return model
 
 
-def descriptor_of(args: argparse.Namespace):
-    """The descriptor ``--descriptor`` and ``--model`` name; ``None`` leaves the choice
-    to the library (its default descriptor)."""
-    from ..descriptors import FPFHTransformer
+def descriptor_of(args: argparse.Namespace, config: dict | None = None):
+    """The descriptor ``--descriptor`` and ``--model`` (and a config's ``[descriptor]``
+    and ``[fpfh]``) name; ``None`` leaves the choice to the library (its default
+    descriptor). See :func:`._config.descriptor_from`."""
+    from ._config import descriptor_from
 
-    if args.descriptor == "fpfh":
-        if getattr(args, "model", None):
-            raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
-        return FPFHTransformer()
-    name = getattr(args, "model", None)
-    if name == "modelnet40":  # the paper's model as registration matches it: 128 axes
-        from ..registration.defaults import REGISTRATION_COMPONENTS
-
-        return load_model(name, REGISTRATION_COMPONENTS)
-    return load_model(name) if name else None
+    descriptor, _ = descriptor_from(
+        config or {},
+        getattr(args, "descriptor", None),
+        getattr(args, "model", None),
+        getattr(args, "n_components", None),
+    )
+    return descriptor
 
 
 def flag_status(result) -> int:

@@ -17,9 +17,19 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["default_config", "load_config", "registration_options", "to_toml"]
+__all__ = [
+    "default_config",
+    "descriptor_from",
+    "load_config",
+    "multiway_options",
+    "registration_options",
+    "run_record",
+    "to_toml",
+    "write_record",
+]
 
-#: ``[register]``: the arguments of ``register()`` the command line also has as flags.
+#: ``[register]``: the arguments of ``register()`` (``register_multiway()`` takes all
+#: but the refinement) the command line also has as flags.
 REGISTER_KEYS = {
     "global_method": "auto",
     "refine": "point_to_plane",
@@ -27,9 +37,22 @@ REGISTER_KEYS = {
     "n_global_points": "auto",
     "seed": 0,
     "symmetry_check": False,
+    "viewpoints": None,
+    "up": None,
+}
+#: ``[descriptor]``: which descriptor a command describes with (``model``: a shipped
+#: model's name or a model file; unset: the command's default) and on how many axes and
+#: threads (unset: the model's own).
+DESCRIPTOR_KEYS: dict[str, Any] = {
+    "kind": "rpointhop",
+    "model": None,
+    "n_components": None,
+    "n_jobs": None,
 }
 # Step parameters a file cannot give (objects, not values).
 _OBJECT_PARAMETERS = {"descriptor", "refine"}
+# Estimator parameters a file does not set (a progress bar is not a setting).
+_NOT_SETTINGS = {"progress"}
 
 
 def _steps() -> dict[str, type]:
@@ -50,12 +73,20 @@ def _settings_defaults() -> dict[str, Any]:
 
 
 def default_config() -> dict[str, dict[str, Any]]:
-    """Every section with its defaults (``None``: derived from the settings)."""
+    """Every section with its defaults (``None``: derived from the settings, or the
+    command's own default)."""
+    from ..descriptors import FPFHTransformer, RPointHopTransformer
+    from ..registration.multiway import MIN_EDGE_FITNESS
+
     config: dict[str, dict[str, Any]] = {"register": dict(REGISTER_KEYS)}
     for name, cls in _steps().items():
         params = cls().get_params(deep=False)
         config[name] = {k: v for k, v in params.items() if k not in _OBJECT_PARAMETERS}
     config["settings"] = _settings_defaults()
+    config["multiway"] = {"min_fitness": MIN_EDGE_FITNESS}
+    config["descriptor"] = dict(DESCRIPTOR_KEYS)
+    config["fpfh"] = _estimator_defaults_of(FPFHTransformer())
+    config["fit"] = _estimator_defaults_of(RPointHopTransformer())
     return config
 
 
@@ -138,6 +169,7 @@ def registration_options(
 
     The global step (``"auto"`` resolved for ``descriptor`` as ``register()`` does) and
     every refinement are built from their sections; the settings from ``[settings]``.
+    :func:`used_config` gives back the config these options are.
     """
     from sklearn.base import clone
 
@@ -183,4 +215,220 @@ def registration_options(
         "n_global_points": register["n_global_points"],
         "seed": register["seed"],
         "settings": settings,
+        "viewpoints": register["viewpoints"],
+        "up": register["up"],
     }
+
+
+def multiway_options(
+    config: dict[str, dict], flags: dict[str, Any], descriptor: Any = None
+) -> dict[str, Any]:
+    """``register_multiway()``'s keyword arguments from a loaded config and the command's
+    flags: ``[register]``'s global step (built from its section), resolution and seed,
+    ``[multiway]``'s edge threshold and ``[settings]``. Multiway refines with
+    point-to-plane ICP (the pose graph needs its information matrices), so a refinement
+    other than that is refused."""
+    options = registration_options(config, {**flags, "symmetry_check": False}, descriptor)
+    if options.pop("up") is not None:
+        raise UsageError("reconstruct takes no up direction ([register] up)")
+    refine = options.pop("refine") or []
+    if [type(step).__name__ for step in refine] != ["PointToPlaneICP"]:
+        raise UsageError("reconstruct refines with point_to_plane ICP only ([register] refine)")
+    if options["global_method"] is None:
+        raise UsageError("reconstruct needs a global step ([register] global_method)")
+    multiway = config.get("multiway", {})
+    min_fitness = flags.get("min_fitness")
+    if min_fitness is None:
+        min_fitness = multiway.get("min_fitness", default_config()["multiway"]["min_fitness"])
+    options["min_fitness"] = min_fitness
+    if not (isinstance(min_fitness, (int, float)) and 0 < min_fitness <= 1):
+        raise UsageError(f"min_fitness must be in (0, 1], got {options['min_fitness']!r}")
+    return options
+
+
+def _section_of(step: Any) -> tuple[str, dict[str, Any]]:
+    """A step's section name and its parameters as a config gives them."""
+    for name, cls in _steps().items():
+        if type(step) is cls:
+            params = step.get_params(deep=False)
+            return name, {k: v for k, v in params.items() if k not in _OBJECT_PARAMETERS}
+    raise TypeError(f"no config section for {type(step).__name__}")  # pragma: no cover
+
+
+def used_config(
+    options: dict[str, Any], descriptor_section: dict[str, Any], extra: dict | None = None
+) -> dict[str, dict[str, Any]]:
+    """The config that gives ``options`` (:func:`registration_options` or
+    :func:`multiway_options`) again: ``[register]`` with every step named, each step's
+    section with every parameter, every setting, and ``[descriptor]`` (and ``[fpfh]``)
+    as given. ``extra``: further sections (``[multiway]``)."""
+    from ..registration import RegistrationSettings, SymmetryCheck
+
+    config: dict[str, dict[str, Any]] = {}
+    register: dict[str, Any] = {
+        "voxel_size": options["voxel_size"],
+        "n_global_points": options["n_global_points"],
+        "seed": options["seed"],
+    }
+    for key in ("viewpoints", "up"):
+        if options.get(key) is not None:
+            register[key] = options[key]
+    step = options["global_method"]
+    if step is None:
+        register["global_method"] = "none"
+    else:
+        register["global_method"], config_params = _section_of(step)
+        config[register["global_method"]] = config_params
+    if "refine" in options:
+        chain = list(options["refine"] or [])
+        register["symmetry_check"] = bool(chain) and isinstance(chain[-1], SymmetryCheck)
+        if register["symmetry_check"]:
+            check = chain.pop()
+            config["symmetry_check"] = {
+                k: v for k, v in check.get_params(deep=False).items() if k != "refine"
+            }
+        names = []
+        for refine in chain:
+            name, params = _section_of(refine)
+            names.append(name)
+            config[name] = params
+        register["refine"] = names[0] if len(names) == 1 else (names or "none")
+    config = {"register": register, **config}
+    settings = options.get("settings") or RegistrationSettings()
+    config["settings"] = {
+        f.name: getattr(settings, f.name)
+        for f in dataclasses.fields(RegistrationSettings)
+        if f.name != "voxel_size"
+    }
+    config.update(extra or {})
+    config["descriptor"] = {k: v for k, v in descriptor_section.items() if k != "fpfh"}
+    if "fpfh" in descriptor_section:
+        config["fpfh"] = descriptor_section["fpfh"]
+    return config
+
+
+def descriptor_from(
+    config: dict[str, dict],
+    kind: str | None,
+    model: str | None,
+    n_components: int | None = None,
+    *,
+    registering: bool = True,
+) -> tuple[Any, dict[str, Any]]:
+    """The descriptor a command describes with, and the ``[descriptor]`` section that
+    names it (with ``"fpfh"``: FPFH's parameters).
+
+    Flags (``--descriptor``, ``--model``, ``--n-components``; ``None`` when not given)
+    win over ``[descriptor]``; ``[fpfh]`` configures FPFH. ``None`` as the descriptor
+    leaves the choice to the library (its default descriptor), unless axes or threads
+    are set, which then apply to that default. ``registering``: the paper's model
+    (``modelnet40``) comes on the 128 axes registration matches; otherwise (``describe``)
+    as ``pretrained()`` gives it, and the default is the paper's model.
+    """
+    from ._common import load_model
+
+    section = {**DESCRIPTOR_KEYS, **config.get("descriptor", {})}
+    for key, value in (("kind", kind), ("model", model), ("n_components", n_components)):
+        if value is not None:
+            section[key] = value
+    if section["kind"] not in ("rpointhop", "fpfh"):
+        raise UsageError(
+            f"[descriptor]: kind must be 'rpointhop' or 'fpfh', got {section['kind']!r}"
+        )
+    n_jobs = section["n_jobs"]
+    if section["kind"] == "fpfh":
+        from ..descriptors import FPFHTransformer
+
+        if section["model"] is not None:
+            raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
+        params = dict(config.get("fpfh", {}))
+        descriptor = FPFHTransformer(**params, **({} if n_jobs is None else {"n_jobs": n_jobs}))
+        try:
+            descriptor._validate_params()
+        except (ValueError, TypeError) as exc:
+            raise UsageError(f"[fpfh]: {exc}") from None
+        return descriptor, {**section, "fpfh": _estimator_defaults_of(descriptor)}
+    name = section["model"]
+    if not registering and name is None:
+        name = section["model"] = "modelnet40"
+    if registering and name == "modelnet40" and section["n_components"] is None:
+        # The paper's model as registration matches it: on 128 axes.
+        from ..registration.defaults import REGISTRATION_COMPONENTS
+
+        section["n_components"] = REGISTRATION_COMPONENTS
+    if name is None and section["n_components"] is None and n_jobs is None:
+        return None, section
+    if name is None:
+        from ..registration.defaults import DEFAULT_MODEL
+
+        name = section["model"] = DEFAULT_MODEL
+    try:
+        descriptor = load_model(name, section["n_components"])
+        if n_jobs is not None:
+            descriptor.set_params(n_jobs=n_jobs)
+            descriptor._validate_params()
+    except (ValueError, TypeError) as exc:
+        if isinstance(exc, ValueError) and not Path(str(name)).exists():
+            raise
+        raise UsageError(f"[descriptor]: {exc}") from None
+    return descriptor, section
+
+
+def _estimator_defaults_of(estimator: Any) -> dict[str, Any]:
+    params = estimator.get_params(deep=False)
+    return {k: v for k, v in params.items() if k not in _NOT_SETTINGS and k != "n_jobs"}
+
+
+def run_record(command: str, config: dict[str, dict], descriptor: Any) -> dict[str, Any]:
+    """What an output records about the run that made it: the library's version and
+    commit, Open3D's, numpy's and Python's, the command, the descriptor (class, model
+    name, content hash, parameters) and the whole config, which
+    ``o3d-rpointhop config --from`` turns back into a file that repeats the run."""
+    from .._utils.provenance import json_safe, library_facts
+    from ..descriptors import descriptor_identity
+    from ..registration.defaults import default_descriptor
+
+    return {
+        **library_facts(),
+        "command": command,
+        "descriptor": descriptor_identity(
+            default_descriptor() if descriptor is None else descriptor
+        ),
+        "config": json_safe(config),
+    }
+
+
+def write_record(output: str, record: dict[str, Any]) -> str:
+    """``record`` as JSON beside a file whose format holds none (``<output>.json``,
+    ``{"provenance": record}``, which ``config --from`` reads); returns its path."""
+    import json
+
+    path = f"{output}.json"
+    Path(path).write_text(json.dumps({"output": str(output), "provenance": record}, indent=2))
+    return path
+
+
+def config_of_record(path: str) -> dict[str, dict[str, Any]]:
+    """The config a JSON output's ``"provenance"`` recorded (CommandError for a file
+    without one)."""
+    import json
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise CommandError(f"{path}: no such file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CommandError(f"{path}: not a JSON file ({exc})") from None
+    record = data.get("provenance") if isinstance(data, dict) else None
+    if not isinstance(record, dict) or not isinstance(record.get("config"), dict):
+        raise CommandError(
+            f"{path}: records no run (no 'provenance' with a 'config'); written by "
+            "register, reconstruct, describe or fit?"
+        )
+    config = record["config"]
+    defaults = default_config()
+    out: dict[str, dict[str, Any]] = {}
+    for section, values in config.items():  # checked as a --config file would be
+        for key, value in values.items():
+            _merge(out, defaults, section, key, value, path)
+    return out

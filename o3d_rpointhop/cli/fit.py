@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from ._common import EXIT_OK, add_viewpoints
+from ._common import EXIT_OK, UsageError, add_config, add_viewpoints
+from ._config import load_config, run_record, write_record
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -41,7 +42,12 @@ _PARAMETERS = (
 def add_parser(commands) -> None:
     p = commands.add_parser("fit", help="fit an R-PointHop model on point cloud files")
     p.add_argument("clouds", nargs="+", help="training clouds (.ply, .las, .e57, .npy, ...)")
-    p.add_argument("-o", "--output", required=True, help="model file to write (.npz)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="model file to write (.npz); what made it is recorded beside it in <output>.json",
+    )
     p.add_argument(
         "--scene",
         action="store_true",
@@ -64,6 +70,7 @@ def add_parser(commands) -> None:
     p.add_argument("--n-jobs", type=int)
     p.add_argument("--random-state", type=int)
     add_viewpoints(p, "training cloud")
+    add_config(p)
     p.set_defaults(func=run)
 
 
@@ -83,18 +90,35 @@ def run(args: argparse.Namespace) -> int:
     from ..descriptors import RPointHopTransformer
     from ..io import check_output_path, read_cloud
 
-    check_output_path(args.output)
-    clouds = [read_cloud(p) for p in args.clouds]
-    params = {name: getattr(args, name) for name in _PARAMETERS if getattr(args, name) is not None}
-    if hasattr(args, "n_components"):  # given ('none' too)
-        params["n_components"] = args.n_components
+    # The recipe (--scene), then [fit] and [descriptor] n_jobs, then the flags.
+    config = load_config(args.config, args.set)
+    params: dict = {}
     if args.scene:
         from ..evaluation.scene_models import SCENE_PARAMS
 
-        params = {**SCENE_PARAMS, **params}
+        params.update(SCENE_PARAMS)
+    params.update(config.get("fit", {}))
+    if config.get("descriptor", {}).get("n_jobs") is not None:
+        params["n_jobs"] = config["descriptor"]["n_jobs"]
+    params.update(
+        {name: getattr(args, name) for name in _PARAMETERS if getattr(args, name) is not None}
+    )
+    if hasattr(args, "n_components"):  # given ('none' too)
+        params["n_components"] = args.n_components
+    try:
+        estimator = RPointHopTransformer(**params)
+        estimator._validate_params()
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"[fit]: {exc}") from None
+    check_output_path(args.output)
+    clouds = [read_cloud(p) for p in args.clouds]
     start = time.perf_counter()
-    model = RPointHopTransformer(**params).fit(clouds, viewpoints=args.viewpoints)
+    model = estimator.fit(clouds, viewpoints=args.viewpoints)
     model.save(args.output)
+    used = {k: v for k, v in model.get_params().items() if k not in ("progress", "n_jobs")}
+    record = run_record("fit", {"fit": used}, model)
+    record["training_clouds"] = list(args.clouds)
+    write_record(args.output, record)
     print(
         f"fitted on {len(clouds)} clouds in {time.perf_counter() - start:.2f} s: "
         f"{model.n_features_out_}-D descriptors, model written to {args.output}"

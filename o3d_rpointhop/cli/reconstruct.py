@@ -12,6 +12,7 @@ from ._common import (
     EXIT_UNRELIABLE,
     PROG,
     CommandError,
+    add_config,
     add_descriptor,
     add_force,
     add_model,
@@ -19,19 +20,24 @@ from ._common import (
     add_viewpoints,
     check_size,
     cloud_bytes,
-    descriptor_of,
+    global_points,
+    positive_or_auto,
 )
+from ._config import descriptor_from, load_config, multiway_options, run_record, used_config
 from .view import add_view
 
 
 def add_parser(commands) -> None:
+    from ..registration.pipeline import GLOBAL_METHODS
+
     p = commands.add_parser(
         "reconstruct",
         help="rebuild an object or scene from unposed scans (multiway registration)",
         description="Register every scan to scan 0 through a pose graph and write the "
         "merged cloud: every point of every placed scan with its colours and normals, "
-        "downsampled only with --voxel-size, coloured by scan with --colour-by-scan. "
-        "Scans no other scan overlaps are reported and left out (exit status 3).",
+        "downsampled only with --output-voxel-size, coloured by scan with --colour-by-scan. "
+        "Scans no other scan overlaps are reported and left out (exit status 3). "
+        "--voxel-size is the registration's resolution, as register's is.",
     )
     p.add_argument(
         "scans",
@@ -64,7 +70,35 @@ def add_parser(commands) -> None:
     add_descriptor(p)
     add_model(p, default="the one-hop object model")
     p.add_argument(
-        "--voxel-size", type=float, help="downsample the merged cloud (and the mesh) to this voxel"
+        "--global",
+        dest="global_method",
+        choices=["auto", *GLOBAL_METHODS],
+        help="the global step that screens each pair (default: auto, the one the "
+        "descriptor states: consensus for --model scene, else ransac)",
+    )
+    p.add_argument(
+        "--voxel-size",
+        type=positive_or_auto,
+        help="the common resolution every distance is a multiple of, as register's "
+        "(default: auto, the coarsest any scan needs to keep --n-global-points)",
+    )
+    p.add_argument(
+        "--n-global-points",
+        type=global_points,
+        help="points the largest scan keeps at the common resolution (default: auto, what "
+        "the model states: 4096 for --model scene; else 2048)",
+    )
+    p.add_argument(
+        "--min-fitness",
+        type=float,
+        help="share of a scan within 1.5 resolutions of the other for a pair to become an "
+        "edge (default 0.3; [multiway] min_fitness)",
+    )
+    add_config(p)
+    p.add_argument(
+        "--output-voxel-size",
+        type=float,
+        help="downsample the merged cloud (and the mesh) to this voxel (default: every point)",
     )
     p.add_argument(
         "--colour-by-scan", action="store_true", help="paint each scan in its own colour"
@@ -76,7 +110,7 @@ def add_parser(commands) -> None:
         help="parallel pair registrations (default -1: every core; the poses do not depend on it)",
     )
     add_viewpoints(p, "scan")
-    add_seed(p)
+    add_seed(p, default=None)
     add_force(p)
     add_view(p)
     p.set_defaults(func=run)
@@ -122,6 +156,20 @@ def run(args: argparse.Namespace) -> int:
     from ..poses import write_pose_graph, write_poses
     from ..registration import register_multiway
 
+    # Settings, model and outputs are checked before any scan is read.
+    config = load_config(args.config, args.set)
+    descriptor, section = descriptor_from(config, args.descriptor, args.model)
+    flags = {
+        "global_method": args.global_method,
+        "voxel_size": args.voxel_size,
+        "n_global_points": args.n_global_points,
+        "seed": args.seed,
+        "viewpoints": args.viewpoints,
+        "min_fitness": args.min_fitness,
+    }
+    options = multiway_options(config, flags, descriptor)
+    used = used_config(options, section, {"multiway": {"min_fitness": options["min_fitness"]}})
+    record = run_record("reconstruct", used, descriptor)
     outputs = (args.output, args.poses, args.mesh, args.pose_graph, args.trajectory, args.result)
     for out in outputs:
         if out:
@@ -130,18 +178,11 @@ def run(args: argparse.Namespace) -> int:
     if len(args.scans) < 2:
         raise CommandError(f"reconstruct needs two or more scans, got {len(args.scans)}")
     scans = [read_cloud(p) for p in args.scans]
-    result = register_multiway(
-        scans,
-        descriptor_of(args),
-        viewpoints=args.viewpoints,
-        n_jobs=args.n_jobs,
-        seed=args.seed,
-        progress=None,
-    )
-    merged = result.merge(scans, voxel_size=args.voxel_size, colour=args.colour_by_scan)
-    check_size(args.output, cloud_bytes(merged), args.force, "downsample with --voxel-size")
+    result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, progress=None, **options)
+    merged = result.merge(scans, voxel_size=args.output_voxel_size, colour=args.colour_by_scan)
+    check_size(args.output, cloud_bytes(merged), args.force, "downsample with --output-voxel-size")
     write_cloud(args.output, merged)
-    summary = result.as_dict(list(args.scans))
+    summary = {**result.as_dict(list(args.scans)), "provenance": record}
     if args.poses:
         Path(args.poses).write_text(json.dumps(summary, indent=2))
     if args.pose_graph:
@@ -161,9 +202,9 @@ def run(args: argparse.Namespace) -> int:
             n_fragments=len(scans),
         )
     if args.result:
-        result.save(args.result)
+        result.save(args.result, provenance=record)
     if args.mesh:
-        mesh = result.mesh(scans, voxel_size=args.voxel_size)
+        mesh = result.mesh(scans, voxel_size=args.output_voxel_size)
         if not o3d.io.write_triangle_mesh(args.mesh, mesh):
             raise CommandError(f"{args.mesh}: Open3D could not write the mesh")
     print(

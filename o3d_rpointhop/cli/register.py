@@ -18,18 +18,21 @@ from ._common import (
     add_model,
     add_seed,
     add_viewpoints,
-    auto_or,
     check_size,
     cloud_bytes,
-    descriptor_of,
     flag_status,
+    global_points,
+    positive_or_auto,
     vector,
 )
-from ._config import load_config, registration_options
+from ._config import (
+    descriptor_from,
+    load_config,
+    registration_options,
+    run_record,
+    used_config,
+)
 from .view import add_view
-
-_voxel = auto_or(float, "a number", lambda v: v > 0, "voxel size must be positive")
-_global_points = auto_or(int, "a count", lambda v: v >= 3, "need at least 3 global points")
 
 
 def add_parser(commands) -> None:
@@ -67,10 +70,10 @@ def add_parser(commands) -> None:
         help="after ICP, also try the estimate's 180-degree twins and keep the best fit "
         "(for objects seen whole)",
     )
-    p.add_argument("--voxel-size", type=_voxel, help="'auto' (the default) or a length")
+    p.add_argument("--voxel-size", type=positive_or_auto, help="'auto' (the default) or a length")
     p.add_argument(
         "--n-global-points",
-        type=_global_points,
+        type=global_points,
         help="points per cloud for the global step: a count, or 'auto' (what the model "
         "states: 4096 for --model scene; else 2048)",
     )
@@ -103,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
     from ..registration import RegistrationWarning, register
 
     # Settings, model and outputs are checked before any cloud is read.
-    descriptor = descriptor_of(args)
+    config = load_config(args.config, args.set)
+    descriptor, section = descriptor_from(config, args.descriptor, args.model)
     flags = {
         "global_method": args.global_method,
         "refine": args.refine,
@@ -111,9 +115,11 @@ def run(args: argparse.Namespace) -> int:
         "n_global_points": args.n_global_points,
         "seed": args.seed,
         "symmetry_check": args.symmetry_check,
+        "viewpoints": args.viewpoints,
+        "up": args.up,
     }
-    config = load_config(args.config, args.set)
     options = registration_options(config, flags, descriptor)
+    record = run_record("register", used_config(options, section), descriptor)
     for out in (args.output, args.transform, args.result):
         if out:
             check_output_path(out)
@@ -128,14 +134,12 @@ def run(args: argparse.Namespace) -> int:
                 target,
                 descriptor,
                 init=init,
-                viewpoints=args.viewpoints,
-                up=args.up,
                 **options,
             )
     except ValueError as exc:  # name the files, not just "source" and "target"
         raise CommandError(f"{exc} (source: {args.source}, target: {args.target})") from exc
     summary = result.as_dict()
-    summary.update({"source": args.source, "target": args.target})
+    summary.update({"source": args.source, "target": args.target, "provenance": record})
     if args.output:
         aligned = type(source)(source).transform(result.transformation)  # a copy
         check_size(args.output, cloud_bytes(aligned), args.force, "downsample the source")
@@ -148,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
             np.savetxt(args.transform, result.transformation, fmt="%.10f")
         summary["transform_file"] = args.transform
     if args.result:
-        result.save(args.result)
+        result.save(args.result, provenance=record)
         summary["result_file"] = args.result
     if args.json:
         print(json.dumps(summary, indent=2))

@@ -3,12 +3,14 @@
 
 Private modules, in the manner of ``sklearn.decomposition``: :mod:`._base` (what both
 share), :mod:`._rpointhop` and :mod:`._fpfh` (the estimators), :mod:`._pretrained` (the
-shipped models), :mod:`._persistence` (the model file format) and the subpackage
+shipped models), :mod:`._persistence` (the model file format), :mod:`._identity` (what a record
+calls a descriptor) and the subpackage
 :mod:`.pointhop` (the R-PointHop maths, free of scikit-learn).
 """
 
 from ._base import BaseDescriptor
 from ._fpfh import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR, FPFHTransformer
+from ._identity import descriptor_identity
 from ._persistence import content_hash
 from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS
 from ._rpointhop import RPointHopTransformer
@@ -22,4 +24,5 @@ __all__ = [
     "PRETRAINED_MODELS",
     "RPointHopTransformer",
     "content_hash",
+    "descriptor_identity",
 ]

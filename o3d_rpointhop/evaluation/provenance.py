@@ -9,20 +9,11 @@ from numbers that do not say what made them.
 from __future__ import annotations
 
 import json
-import subprocess
 from importlib import metadata
 from pathlib import Path
 
-import numpy as np
-
-from ..descriptors import (
-    FEATURE_RADIUS_FACTOR,
-    NORMAL_RADIUS_FACTOR,
-    PRETRAINED_MODELS,
-    FPFHTransformer,
-    RPointHopTransformer,
-    content_hash,
-)
+from .._utils.provenance import json_safe, library_facts
+from ..descriptors import FPFHTransformer, RPointHopTransformer, descriptor_identity
 from ._common import machine_facts
 from .methods import METHODS, open3d_recipe_descriptor, shipped_scene_model
 
@@ -40,46 +31,10 @@ __all__ = [
 REQUIRED = ("o3d_rpointhop", "commit", "open3d", "numpy", "python", "threads", "methods")
 
 
-def _json_safe(value):
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    return repr(value)
-
-
-def _shipped_name(model: RPointHopTransformer, digest: str) -> str | None:
-    """The shipped model ``model`` is (on its number of axes), or None."""
-    for name in PRETRAINED_MODELS:
-        try:
-            shipped = RPointHopTransformer.pretrained(name, n_components=model.n_components)
-        except ValueError:  # more axes than that file holds
-            continue
-        if content_hash(shipped) == digest:
-            return name
-    return None
-
-
 def model_identity(model: RPointHopTransformer) -> dict:
-    """A fitted R-PointHop model as a record names it: class, shipped name (or
-    ``"fitted"``), content hash (:func:`~o3d_rpointhop.descriptors.content_hash`),
-    descriptor size and parameters."""
-    digest = content_hash(model)
-    out = {
-        "class": "o3d_rpointhop.RPointHopTransformer",
-        "model": _shipped_name(model, digest) or "fitted",
-        "sha256": digest,
-        "n_features_out": int(model.n_features_out_),
-        "params": _json_safe(model.get_params()),
-    }
-    scenes = getattr(model, "training_scenes_", None)
-    if scenes:
-        out["training_scenes"] = sorted(scenes)
-    return out
+    """A fitted R-PointHop model as a record names it
+    (:func:`~o3d_rpointhop.descriptors.descriptor_identity`)."""
+    return descriptor_identity(model)
 
 
 def _open3d_fpfh() -> dict:
@@ -91,11 +46,7 @@ def _open3d_fpfh() -> dict:
 
 
 def _library_fpfh() -> dict:
-    return {
-        "class": "o3d_rpointhop.FPFHTransformer",
-        "params": _json_safe(FPFHTransformer().get_params()),
-        "radius_factors": {"normals": NORMAL_RADIUS_FACTOR, "features": FEATURE_RADIUS_FACTOR},
-    }
+    return descriptor_identity(FPFHTransformer())
 
 
 def _kiss_matcher() -> dict:
@@ -121,7 +72,7 @@ def _method_entry(name: str, given: RPointHopTransformer, loso: dict, identity) 
     entry: dict = {"description": method.description}
     options = getattr(method.run, "options", None)
     if options is not None:
-        entry["options"] = _json_safe(
+        entry["options"] = json_safe(
             {k: getattr(v, "__name__", v) if callable(v) else v for k, v in options.items()}
         )
     if method.model == "given":
@@ -139,44 +90,10 @@ def _method_entry(name: str, given: RPointHopTransformer, loso: dict, identity) 
     return entry
 
 
-def _commit() -> dict:
-    """The checkout's commit and whether the package's files differ from it (None
-    outside a git checkout)."""
-    root = Path(__file__).resolve().parents[2]
-    if not (root / ".git").exists():
-        return {"id": None, "modified": None}
-    try:
-        head = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            timeout=30,
-        ).stdout.strip()
-        changed = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--", "o3d_rpointhop"],
-            capture_output=True,
-            text=True,
-            check=True,
-            timeout=30,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return {"id": None, "modified": None}
-    return {"id": head, "modified": bool(changed)}
-
-
 def _run_facts() -> dict:
     """What every provenance holds besides its methods: the library versions
     (:func:`~._common.machine_facts`'s), the commit and the thread budget."""
-    facts = machine_facts()
-    return {
-        "o3d_rpointhop": facts["o3d_rpointhop"],
-        "commit": _commit(),
-        "open3d": facts["open3d"],
-        "numpy": facts["numpy"],
-        "python": facts["python"],
-        "threads": facts["thread_budget"],
-    }
+    return {**library_facts(), "threads": machine_facts()["thread_budget"]}
 
 
 def _memoised_identity():

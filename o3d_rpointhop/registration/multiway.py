@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
+from sklearn.base import clone
 
 from .._utils.parallel import parallel_map, single_threaded
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
@@ -54,15 +55,21 @@ RETRIEVED_NEIGHBOURS = 6
 ALL_PAIRS_UP_TO = 12
 
 
-def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: str = "ransac"):
-    """How a pair is registered. Screening a candidate pair: ``register()``'s global step
-    for the descriptor (``global_method``: RANSAC unless the descriptor states another),
-    then one point-to-plane ICP pass at the settings' widest ICP distance on the
-    global clouds (the common resolution). Refining a kept edge from the optimised
-    poses: ``register()``'s point-to-plane ICP, ending on the full scans."""
+def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any = "ransac"):
+    """How a pair is registered. Screening a candidate pair: the global step
+    (``global_method``: a key of ``GLOBAL_METHODS`` or a step, copied unfitted; by
+    default ``register()``'s for the descriptor), then one point-to-plane ICP pass at
+    the settings' widest ICP distance on the global clouds (the common resolution).
+    Refining a kept edge from the optimised poses: ``register()``'s point-to-plane ICP,
+    ending on the full scans."""
     if screen:
         coarse = PointToPlaneICP(settings.icp_distances[0], full_resolution=False)
-        return [("global", GLOBAL_METHODS[global_method]()), ("refine", coarse)]
+        step = (
+            GLOBAL_METHODS[global_method]()
+            if isinstance(global_method, str)
+            else clone(global_method)
+        )
+        return [("global", step), ("refine", coarse)]
     return [("refine", PointToPlaneICP())]
 
 
@@ -188,6 +195,8 @@ def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
     {
         "clouds": [list, tuple],
         "descriptor": [None, HasMethods(["transform"])],
+        "global_method": [str, HasMethods(["run"])],
+        "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
         "min_fitness": [Interval(Real, 0, 1, closed="right")],
         "n_jobs": [None, Integral],
@@ -203,6 +212,8 @@ def register_multiway(
     descriptor: Any = None,
     *,
     viewpoints: Any = None,
+    global_method: Any = "auto",
+    voxel_size: float | str = "auto",
     n_global_points: int | str = "auto",
     min_fitness: float = MIN_EDGE_FITNESS,
     n_jobs: int | None = None,
@@ -227,10 +238,19 @@ def register_multiway(
         Where each scan's sensor stood, in the scan's own coordinates; ``"origin"``:
         every scan is in its sensor's frame. Normals and local frames then face the
         sensor (see :func:`~o3d_rpointhop.register`). ``None``: no sensor is known.
+    global_method : str or step, default="auto"
+        The step that screens each candidate pair: ``"auto"`` (the one the descriptor
+        states, as above), a name of :data:`~o3d_rpointhop.registration.GLOBAL_METHODS`
+        (``"ransac"``, ``"consensus"``, ...) or a configured step such as
+        ``RANSACGlobal(max_iteration=200_000)`` (copied for every pair).
+    voxel_size : float or "auto", default="auto"
+        The common resolution, as ``register()``'s ``voxel_size`` is a pair's: every
+        distance of the settings is a multiple of it. ``"auto"``: the coarsest any scan
+        needs to keep about ``n_global_points`` points.
     n_global_points : int or "auto", default="auto"
-        The common resolution keeps about this many points of the largest scan;
-        ``"auto"``: the descriptor's ``registration_points_`` (the scene model: 4096),
-        else 2048.
+        With ``voxel_size="auto"``, the common resolution keeps about this many points
+        of the largest scan; ``"auto"``: the descriptor's ``registration_points_`` (the
+        scene model: 4096), else 2048.
     min_fitness : float, default=0.3
         A pair becomes an edge when its screening leaves at least this share of the
         source scan (at the common resolution) within the settings' ``edge_distance``
@@ -267,13 +287,16 @@ def register_multiway(
     points = [p - origin for p in points]
     views = [None if v is None else v - origin for v in views]
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
-    global_method = resolve_global_method("auto", worker)
-    if global_method not in GLOBAL_METHODS:
+    global_method = resolve_global_method(global_method, worker)
+    if isinstance(global_method, str) and global_method not in GLOBAL_METHODS:
         raise ValueError(
-            f"the descriptor's registration_global_method_ {global_method!r} is not one of "
-            f"{sorted(GLOBAL_METHODS)}"
+            f"global_method must be 'auto' or one of {sorted(GLOBAL_METHODS)} (or a global "
+            f"step), got {global_method!r}"
         )
-    voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
+    if voxel_size == "auto":
+        voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
+    else:
+        voxel = float(voxel_size)
     settings = (settings or RegistrationSettings()).at(voxel)
     # Every scan is downsampled, described and given normals once, for all its pairs.
     prepared = parallel_map(

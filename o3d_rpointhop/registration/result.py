@@ -38,9 +38,13 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"cannot write {type(value).__name__} to JSON")
 
 
-def write_json(path: str | os.PathLike, kind: str, body: dict) -> None:
-    """``body`` as a JSON file tagged with ``kind`` and :data:`RESULT_FORMAT`."""
-    text = json.dumps({"kind": kind, "format": RESULT_FORMAT, **body}, default=_plain)
+def write_json(
+    path: str | os.PathLike, kind: str, body: dict, provenance: dict | None = None
+) -> None:
+    """``body`` as a JSON file tagged with ``kind`` and :data:`RESULT_FORMAT`, with
+    ``provenance`` when given."""
+    extra = {} if provenance is None else {"provenance": provenance}
+    text = json.dumps({"kind": kind, "format": RESULT_FORMAT, **body, **extra}, default=_plain)
     Path(path).write_text(text)
 
 
@@ -255,15 +259,17 @@ class RegistrationResult:
             "steps": [s.as_dict() for s in self.steps],
         }
 
-    def save(self, path: str | os.PathLike) -> None:
+    def save(self, path: str | os.PathLike, provenance: dict | None = None) -> None:
         """Write everything this result holds (inlier pairs and every step included) to
-        a JSON file that :meth:`load` reads back."""
+        a JSON file that :meth:`load` reads back; ``provenance``, a JSON-ready record of
+        what made it (the command line's: version, commit, descriptor, config), is
+        stored beside it under ``"provenance"``."""
         body = {
             **self.as_dict(),
             "correspondence_set": self.correspondence_set,
             "steps": [s._full() for s in self.steps],
         }
-        write_json(path, "RegistrationResult", body)
+        write_json(path, "RegistrationResult", body, provenance)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> RegistrationResult:
@@ -405,11 +411,12 @@ class MultiwayResult:
         mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(merged, depth=depth)
         return mesh
 
-    def save(self, path: str | os.PathLike) -> None:
+    def save(self, path: str | os.PathLike, provenance: dict | None = None) -> None:
         """Write the poses, the candidate pairs, the edges and the optimised pose graph
         (nodes, edges with their information matrices) to a JSON file that
         :meth:`load` reads back. (``o3d-rpointhop reconstruct --pose-graph`` writes the
-        graph alone in Open3D's format, for ``open3d.io.read_pose_graph``.)"""
+        graph alone in Open3D's format, for ``open3d.io.read_pose_graph``.)
+        ``provenance``: as :meth:`RegistrationResult.save` stores it."""
         graph = self.pose_graph
         body = {
             "poses": self.poses,
@@ -433,7 +440,7 @@ class MultiwayResult:
                 ],
             },
         }
-        write_json(path, "MultiwayResult", body)
+        write_json(path, "MultiwayResult", body, provenance)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> MultiwayResult:

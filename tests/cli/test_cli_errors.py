@@ -91,7 +91,8 @@ def test_cli_help_lists_the_exit_statuses(capsys):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["describe", "missing.ply", "--model", "m.npz", "-o", "d.npy"], "no such file"),
+        (["describe", "missing.ply", "--model", "m.npz", "-o", "d.npy"], "no such model file"),
+        (["describe", "missing.ply", "-o", "d.npy"], "no such file"),
         (
             ["fit", "bad.ply", "-o", "m.npz"],
             "bad.ply: damaged or unreadable .ply file (not a PLY file",
@@ -154,7 +155,7 @@ def test_debug_shows_the_traceback_where_an_unexpected_error_says_how(
     def broken(*args, **kwargs):
         raise RuntimeError("something broke")
 
-    monkeypatch.setattr(describe, "load_model", broken)
+    monkeypatch.setattr(describe, "descriptor_from", broken)
     np.save(tmp_path / "c.npy", OBJECT)
     args = ["describe", str(tmp_path / "c.npy"), "-o", str(tmp_path / "d.npy")]
     assert main(args) == EXIT_ERROR

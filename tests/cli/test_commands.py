@@ -47,7 +47,7 @@ def test_reconstruct_command(tmp_path, capsys):
         np.asarray(o3d.io.read_point_cloud(names[1]).normals)[:5] @ pose[:3, :3].T,
         atol=1e-6,
     )
-    args = ["--voxel-size", "0.05", "--colour-by-scan"]
+    args = ["--output-voxel-size", "0.05", "--colour-by-scan"]
     assert main(["reconstruct", *names, "-o", str(out), *args]) == EXIT_OK
     merged = o3d.io.read_point_cloud(str(out))
     assert 100 < len(merged.points) < sum(len(s) for s in scans) / 2
@@ -93,6 +93,64 @@ def test_reconstruct_reads_folders_and_patterns_and_keeps_line_k_for_scan_k(tmp_
     capsys.readouterr()
     assert main(["reconstruct", str(tmp_path / "nothing*.ply"), *common]) == 1
     assert "no file matches this pattern" in capsys.readouterr().err
+
+
+def test_reconstruct_reaches_every_setting_and_records_its_run(tmp_path, capsys):
+    """--global, --voxel-size (the resolution, as register's), --min-fitness and a
+    config's sections reach register_multiway: the poses equal the library's called
+    with the same options; the poses file records the run, and ``config --from`` on it
+    repeats the run to the bit. A refinement multiway cannot use is refused before any
+    scan is read."""
+    from o3d_rpointhop import register_multiway
+    from o3d_rpointhop.registration import RegistrationSettings
+    from o3d_rpointhop.cli import EXIT_OK
+    from o3d_rpointhop.registration.steps import RANSACGlobal
+
+    scans, _ = partial_views(3, seed=3)
+    names = []
+    for k, scan in enumerate(scans):
+        np.save(tmp_path / f"s{k}.npy", scan)
+        names.append(str(tmp_path / f"s{k}.npy"))
+    poses = tmp_path / "p.json"
+    args = [
+        *names, "-o", str(tmp_path / "m.ply"), "--poses", str(poses), "--global", "ransac",
+        "--voxel-size", "0.04", "--min-fitness", "0.4", "--set", "ransac.max_iteration=50000",
+        "--set", "settings.edge_factor=2.0", "--n-jobs", "1",
+    ]  # fmt: skip
+    assert main(["reconstruct", *args]) == EXIT_OK
+    summary = json.loads(poses.read_text())
+    expected = register_multiway(
+        scans,
+        global_method=RANSACGlobal(max_iteration=50000),
+        voxel_size=0.04,
+        min_fitness=0.4,
+        settings=RegistrationSettings(edge_factor=2.0),
+    )
+    assert summary["voxel_size"] == 0.04
+    for got, want in zip(summary["poses"], expected.poses, strict=True):
+        np.testing.assert_array_equal(np.array(got), want)
+    config = summary["provenance"]["config"]
+    assert config["multiway"]["min_fitness"] == 0.4
+    assert config["ransac"]["max_iteration"] == 50000 and config["register"]["voxel_size"] == 0.04
+    toml = tmp_path / "c.toml"
+    assert main(["config", "--from", str(poses), "-o", str(toml)]) == 0
+    again = tmp_path / "q.json"
+    plain = [*names, "-o", str(tmp_path / "m2.ply"), "--poses", str(again), "--config", str(toml)]
+    assert main(["reconstruct", *plain]) == EXIT_OK
+    assert json.loads(again.read_text())["poses"] == summary["poses"]
+    capsys.readouterr()
+    status = main(
+        [
+            "reconstruct",
+            "no.ply",
+            "such.ply",
+            "-o",
+            "x.ply",
+            "--set",
+            "register.refine='generalized'",
+        ]
+    )
+    assert status == 2 and "point_to_plane ICP only" in capsys.readouterr().err
 
 
 def test_fit_then_describe(tmp_path, capsys):

@@ -108,3 +108,87 @@ def test_model_object_runs_what_the_default_runs(capsys, pair):
     paper = descriptor_of(argparse.Namespace(descriptor="rpointhop", model="modelnet40"))
     assert paper.n_features_out_ == 128 and len(paper.n_neighbors) == 4
     assert descriptor_of(argparse.Namespace(descriptor="rpointhop", model=None)) is None
+
+
+def test_outputs_record_their_run_and_config_from_repeats_it(tmp_path, capsys, pair):
+    """A JSON output names the library, the commit, the descriptor (shipped name and
+    content hash) and the whole config; ``config --from`` turns it into a file that,
+    given back, repeats the run to the bit, and a file without a record is refused."""
+    from o3d_rpointhop import RPointHopTransformer
+    from o3d_rpointhop.descriptors import content_hash
+
+    _, _, files = pair
+    changed = [
+        "--set", "consensus.max_matches=3000", "--set", "settings.icp_factors=[3.0, 1.0]",
+        "--seed", "4", "--model", "scene", "--result", str(tmp_path / "r.json"),
+    ]  # fmt: skip
+    out = _run(capsys, [*files, *changed])
+    record = out["provenance"]
+    assert record["o3d_rpointhop"] and "commit" in record and record["command"] == "register"
+    assert record["descriptor"]["model"] == "scene"
+    assert record["descriptor"]["sha256"] == content_hash(RPointHopTransformer.pretrained("scene"))
+    config = record["config"]
+    assert config["register"]["seed"] == 4 and config["descriptor"]["model"] == "scene"
+    # The scene model states the consensus; every step is named with every parameter.
+    assert config["register"]["global_method"] == "consensus"
+    assert config["settings"]["icp_factors"] == [3.0, 1.0]
+    assert (
+        config["consensus"]["max_matches"] == 3000 and "max_iteration" in config["point_to_plane"]
+    )
+    saved = json.loads((tmp_path / "r.json").read_text())
+    assert saved["provenance"] == record
+    for source in ("r.json", "out.json"):
+        (tmp_path / "out.json").write_text(json.dumps(out))
+        assert (
+            main(["config", "--from", str(tmp_path / source), "-o", str(tmp_path / "c.toml")]) == 0
+        )
+        again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
+        assert again["transformation"] == out["transformation"]
+        assert again["provenance"]["config"] == config
+        (tmp_path / "c.toml").unlink()
+    (tmp_path / "plain.json").write_text("{}")
+    assert main(["config", "--from", str(tmp_path / "plain.json")]) == EXIT_ERROR
+    assert "records no run" in capsys.readouterr().err
+
+
+def test_describe_and_fit_take_a_config_and_record_their_runs(tmp_path, capsys):
+    """fit: [fit] reaches the estimator (flags win over it), the model's record beside
+    it repeats the fit through ``config --from``; describe: [descriptor] and [fpfh]
+    choose and configure the descriptor, and the record names it."""
+    from o3d_rpointhop import FPFHTransformer, RPointHopTransformer
+    from o3d_rpointhop.io import read_cloud
+
+    clouds = []
+    for k in range(2):
+        np.save(tmp_path / f"c{k}.npy", make_object(300, shape_seed=k))
+        clouds.append(str(tmp_path / f"c{k}.npy"))
+    model = tmp_path / "m.npz"
+    sets = ["--set", "fit.n_neighbors=[24, 16]", "--set", "fit.hop_sizes=[1.0, 0.5]"]
+    args = [*clouds, "-o", str(model), "--random-state", "3", "--set", "fit.lrf_neighbors=20"]
+    assert main(["fit", *args, *sets]) == 0
+    fitted = RPointHopTransformer.load(model)
+    assert fitted.n_neighbors == (24, 16) and fitted.lrf_neighbors == 20
+    assert fitted.random_state == 3
+    record = json.loads((tmp_path / "m.npz.json").read_text())["provenance"]
+    assert record["command"] == "fit" and record["config"]["fit"]["n_neighbors"] == [24, 16]
+    toml = tmp_path / "fit.toml"
+    assert main(["config", "--from", str(tmp_path / "m.npz.json"), "-o", str(toml)]) == 0
+    again = tmp_path / "again.npz"
+    assert main(["fit", *clouds, "-o", str(again), "--config", str(toml)]) == 0
+    np.testing.assert_array_equal(
+        RPointHopTransformer.load(again).transform(np.load(clouds[0])),
+        fitted.transform(np.load(clouds[0])),
+    )
+    assert main(["fit", *clouds, "-o", str(tmp_path / "x.npz"), "--set", "fit.pooling='x'"]) == 2
+    assert "[fit]" in capsys.readouterr().err
+
+    out = tmp_path / "d.npy"
+    sets = ["--set", "descriptor.kind='fpfh'", "--set", "fpfh.max_nn=40"]
+    assert main(["describe", clouds[0], "-o", str(out), *sets]) == 0
+    expected = FPFHTransformer(max_nn=40).transform(read_cloud(clouds[0]))
+    np.testing.assert_array_equal(np.load(out), expected)
+    record = json.loads((tmp_path / "d.npy.json").read_text())["provenance"]
+    assert record["descriptor"]["params"]["max_nn"] == 40
+    assert main(["describe", clouds[0], "-o", str(out), "--model", str(model)]) == 0
+    record = json.loads((tmp_path / "d.npy.json").read_text())["provenance"]
+    assert record["descriptor"]["model"] == "fitted"

@@ -163,3 +163,28 @@ def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(
     ran.clear()
     register_multiway(scans, FPFHTransformer(), seed=0)
     assert ran == [RANSACGlobal] * 3
+
+
+def test_the_global_step_and_resolution_can_be_chosen():
+    """A named step, a configured step and a fixed resolution reach every pair: the
+    result's resolution is the one given, a step that finds nothing (RANSAC allowed a
+    single draw) leaves the scans unconnected, and a name gives what its default step
+    gives."""
+    from o3d_rpointhop.registration.steps import RANSACGlobal
+
+    scans, truth = partial_views(3, seed=3)
+    auto = register_multiway(scans, seed=0)
+    named = register_multiway(scans, seed=0, global_method="ransac")
+    assert named.edges == auto.edges  # the object model states no step: RANSAC
+    for a, b in zip(auto.poses, named.poses, strict=True):
+        np.testing.assert_array_equal(a, b)
+    fixed = register_multiway(scans, seed=0, voxel_size=0.05)
+    assert fixed.voxel_size == 0.05 and auto.voxel_size != 0.05
+    for k in range(3):
+        assert rotation_error_deg(fixed.poses[k], truth[k]) < 2.0
+    starved = register_multiway(
+        scans, seed=0, global_method=RANSACGlobal(max_iteration=1, confidence=0.5)
+    )
+    assert len(starved.edges) < len(auto.edges)
+    with pytest.raises(ValueError, match="global_method"):
+        register_multiway(scans, global_method="magic")
