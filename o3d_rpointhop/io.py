@@ -15,9 +15,11 @@ from ._utils.validation import PrecisionWarning, as_points, coarse_float32
 
 __all__ = [
     "read_cloud",
+    "read_provenance",
     "write_cloud",
     "OPEN3D_FORMATS",
     "READ_FORMATS",
+    "WRITE_FORMATS",
     "MESH_POINTS",
     "PrecisionWarning",
 ]
@@ -392,16 +394,184 @@ def save_npy(path: str | os.PathLike, array: np.ndarray) -> None:
         np.save(fh, array)
 
 
-def write_cloud(path: str | os.PathLike, cloud) -> None:
-    """Write a cloud (array or Open3D point cloud) in the format its extension names."""
+#: Extensions :func:`write_cloud` writes.
+WRITE_FORMATS = OPEN3D_FORMATS + (".npy", ".las", ".laz", ".e57")
+#: The VLR a LAS file written here records its run in (user id, record id).
+LAS_RECORD = ("o3d-rpointhop", 1)
+
+
+def _as_open3d(cloud) -> o3d.geometry.PointCloud:
+    if isinstance(cloud, o3d.geometry.PointCloud):
+        return cloud
+    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(as_points(cloud)))
+
+
+def _las_grid(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets and scales for points with no template: offsets at the whole units
+    below the points, a power-of-ten scale that keeps about 1e-7 of the cloud's extent
+    (well inside LAS's 32-bit integers)."""
+    low = np.floor(points.min(axis=0))
+    extent = max(float(np.ptp(points, axis=0).max()), 1e-6)
+    scale = 10.0 ** np.floor(np.log10(extent * 1e-7))
+    return low, np.full(3, scale)
+
+
+def _write_las(path: Path, cloud, like, provenance) -> None:
+    laspy = _optional("laspy", path.suffix.lower())
+    points = np.asarray(cloud.points)
+    colours = np.asarray(cloud.colors) if cloud.has_colors() else None
+    template = None
+    if like is not None and Path(like).suffix.lower() in (".las", ".laz"):
+        template = laspy.open(str(like)).header
+    if template is not None:
+        point_format, version = template.point_format.id, str(template.version)
+        offsets, scales = np.asarray(template.offsets), np.asarray(template.scales)
+    else:
+        point_format, version = 0, "1.2"
+        offsets, scales = _las_grid(points)
+    names = set(laspy.PointFormat(point_format).dimension_names)
+    if colours is not None and not {"red", "green", "blue"} <= names:
+        point_format = 7 if version == "1.4" else 3  # the same format with colours
+    header = laspy.LasHeader(point_format=point_format, version=version)
+    header.offsets, header.scales = offsets, scales
+    span = (points - offsets) / scales
+    if np.abs(span).max(initial=0.0) >= 2**31 - 1:
+        raise ValueError(
+            f"{path}: the points do not fit the LAS grid (offsets {offsets.tolist()}, "
+            f"scales {scales.tolist()}) of {like}"
+        )
+    if provenance is not None:
+        import json
+
+        header.vlrs.append(
+            laspy.VLR(*LAS_RECORD, "o3d-rpointhop run", json.dumps(provenance).encode())
+        )
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    if colours is not None:
+        rgb = np.round(np.clip(colours, 0, 1) * 65535).astype(np.uint16)
+        las.red, las.green, las.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    las.write(str(path))
+
+
+def _write_e57(path: Path, cloud) -> None:
+    pye57 = _optional("pye57", ".e57")
+    points = np.asarray(cloud.points)
+    # pye57 stores coordinates in single precision: they are written about the
+    # cloud's centre (in whole units), which the scan's pose puts back, so that float32
+    # holds them to about 1e-7 of the cloud's extent at survey coordinates too.
+    centre = np.floor(points.mean(axis=0))
+    data = {f"cartesian{a}": points[:, k] - centre[k] for k, a in enumerate("XYZ")}
+    if cloud.has_colors():
+        rgb = np.round(np.clip(np.asarray(cloud.colors), 0, 1) * 255).astype(np.uint8)
+        for k, channel in enumerate(("Red", "Green", "Blue")):
+            data[f"color{channel}"] = rgb[:, k].copy()
+    e57 = pye57.E57(str(path), mode="w")
+    try:
+        e57.write_scan_raw(
+            data, name=path.stem, rotation=np.array([1.0, 0.0, 0.0, 0.0]), translation=centre
+        )
+    finally:
+        e57.close()
+
+
+#: How the lines of a run's record start in a PLY header.
+_PLY_RECORD = b"comment o3d-rpointhop "
+#: Characters of the record per PLY comment line (Open3D's PLY reader, RPly, aborts on
+#: header lines over 1024 characters).
+_PLY_CHUNK = 200
+
+
+def _ply_with_comment(path: Path, provenance: dict) -> None:
+    """Record ``provenance`` as JSON in ``comment`` lines of a PLY header (Open3D writes
+    none; readers skip comments): the file is copied once with the lines added."""
+    import json
+    import shutil
+    import tempfile
+
+    text = json.dumps(provenance).encode()
+    lines = b"".join(
+        _PLY_RECORD + text[k : k + _PLY_CHUNK] + b"\n" for k in range(0, len(text), _PLY_CHUNK)
+    )
+    with open(path, "rb") as src:
+        opening = src.readline() + src.readline()  # "ply", then the format line
+        with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as dst:
+            dst.write(opening)
+            dst.write(lines)
+            shutil.copyfileobj(src, dst)
+    os.replace(dst.name, path)
+
+
+def read_provenance(path: str | os.PathLike) -> dict | None:
+    """The record of the run that wrote a cloud file (:func:`write_cloud`'s
+    ``provenance``): from a LAS/LAZ file's VLR or a PLY header's comments; ``None``
+    when the file holds none."""
+    import json
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".las", ".laz"):
+        laspy = _optional("laspy", suffix)
+        with laspy.open(str(path)) as reader:
+            for vlr in reader.header.vlrs:
+                if (vlr.user_id, vlr.record_id) == LAS_RECORD:
+                    return json.loads(vlr.record_data)
+        return None
+    if suffix == ".ply":
+        parts = []
+        with open(path, "rb") as fh:
+            for line in fh:
+                if line.startswith(_PLY_RECORD):
+                    parts.append(line[len(_PLY_RECORD) :].rstrip(b"\n"))
+                elif line.strip() == b"end_header":
+                    break
+        return json.loads(b"".join(parts)) if parts else None
+    return None
+
+
+def write_cloud(
+    path: str | os.PathLike,
+    cloud,
+    *,
+    like: str | os.PathLike | None = None,
+    provenance: dict | None = None,
+) -> None:
+    """Write a cloud in the format its extension names.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.ply``, ``.pcd``, ``.xyz``, ``.xyzn``, ``.xyzrgb``, ``.pts`` (Open3D), ``.npy``
+        (the points), ``.las`` / ``.laz`` (laspy, the ``las`` extra: coordinates on the
+        LAS grid of ``like``, colours as 16-bit channels), ``.e57`` (pye57, the ``e57``
+        extra: one scan named after the file, its points in single precision about
+        their centre, which the scan's pose puts back; colours as 8-bit).
+    cloud : array-like (n, 3) or open3d.geometry.PointCloud
+    like : str or path-like, optional
+        A LAS/LAZ file whose point format, version, offsets and scales a LAS/LAZ output
+        keeps (the scan the cloud came from): survey coordinates go back on their own
+        grid. Without one, offsets at the whole units below the points and a
+        power-of-ten scale of about 1e-7 of the cloud's extent.
+    provenance : dict, optional
+        What made the cloud, JSON-ready: recorded in a LAS/LAZ file as a VLR (user id
+        ``"o3d-rpointhop"``, record 1) and in a PLY header as ``comment`` lines;
+        :func:`read_provenance` reads it back. The other formats have no place for it.
+    """
     path = check_output_path(path)
-    if not isinstance(cloud, o3d.geometry.PointCloud):
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(as_points(cloud)))
+    cloud = _as_open3d(cloud)
     suffix = path.suffix.lower()
     if suffix == ".npy":
         save_npy(path, np.asarray(cloud.points))
-        return
-    if suffix not in OPEN3D_FORMATS:
-        raise ValueError(f"{path}: cannot write format {suffix!r}; use .npy or {OPEN3D_FORMATS}")
-    if not o3d.io.write_point_cloud(str(path), cloud):
-        raise OSError(f"Open3D could not write {path}")
+    elif suffix in (".las", ".laz"):
+        _write_las(path, cloud, like, provenance)
+    elif suffix == ".e57":
+        _write_e57(path, cloud)
+    elif suffix in OPEN3D_FORMATS:
+        if not o3d.io.write_point_cloud(str(path), cloud):
+            raise OSError(f"Open3D could not write {path}")
+        if suffix == ".ply" and provenance is not None:
+            _ply_with_comment(path, provenance)
+    else:
+        raise ValueError(
+            f"{path}: cannot write format {suffix!r}; use one of {', '.join(WRITE_FORMATS)}"
+        )

@@ -30,9 +30,11 @@ __all__ = [
     "read_matrix",
     "read_poses",
     "read_pose_graph",
+    "read_trajectory",
     "write_matrix",
     "write_pose_graph",
     "write_poses",
+    "write_trajectory",
 ]
 
 #: What :func:`read_poses` and :func:`write_poses` read and write.
@@ -124,6 +126,7 @@ def write_poses(
     timestamps: Sequence[float] | None = None,
     pairs: Sequence[tuple[int, int]] | None = None,
     n_fragments: int | None = None,
+    comment: str | None = None,
 ) -> None:
     """Write poses as a trajectory file.
 
@@ -143,7 +146,13 @@ def write_poses(
     n_fragments : int, default=None
         3DMatch only: the third number of every header line (default: the number of
         poses).
+    comment : str, default=None
+        TUM only (the one format with comments): a first line ``# comment``, e.g. the
+        record of the run that made the poses; readers skip it. ValueError for the
+        other formats.
     """
+    if comment is not None and format != "tum":
+        raise ValueError(f"a {format} trajectory has no comments; only TUM's has")
     poses = _as_poses(poses, allow_missing=format == "kitti")
     path = Path(path)
     lines = []
@@ -172,7 +181,87 @@ def write_poses(
             lines += [" ".join(f"{v:.9g}" for v in row) for row in pose]
     else:
         raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
+    if comment is not None:
+        lines.insert(0, "# " + " ".join(comment.splitlines()))
     path.write_text("\n".join(lines) + "\n")
+
+
+def write_trajectory(
+    path: str | os.PathLike,
+    poses: Sequence,
+    format: str = "kitti",
+    *,
+    comment: str | None = None,
+) -> None:
+    """Write scan ``k``'s pose (``None``: the scan has none) so that every format says
+    which scan each pose is.
+
+    KITTI: line ``k`` is scan ``k``, a line of 12 ``nan`` for a scan without a pose.
+    TUM: timestamp ``k`` names scan ``k``; scans without a pose are left out (TUM has
+    no way to mark one). 3DMatch ``.log``: record ``0 k n`` is scan ``k`` into scan 0,
+    ``n`` the number of scans; scans without a pose are left out. :func:`read_trajectory`
+    reads each back as the same list. ``comment``: see :func:`write_poses` (TUM only).
+    """
+    poses = list(poses)
+    placed = [k for k, pose in enumerate(poses) if format == "kitti" or pose is not None]
+    write_poses(
+        path,
+        [poses[k] for k in placed],
+        format,
+        timestamps=[float(k) for k in placed],
+        pairs=[(0, k) for k in placed],
+        n_fragments=len(poses),
+        comment=comment,
+    )
+
+
+def read_trajectory(
+    path: str | os.PathLike, format: str = "kitti", n_scans: int | None = None
+) -> list[np.ndarray | None]:
+    """Scan ``k``'s pose at index ``k`` (``None`` for a scan without one), as
+    :func:`write_trajectory` writes them.
+
+    KITTI: line ``k``. TUM: a whole-number timestamp ``k`` is scan ``k`` (other
+    timestamps: the poses in file order). 3DMatch ``.log``: record ``i k n`` is scan
+    ``k``, every record into the same scan ``i``; the list is ``n`` long. ``n_scans``
+    lengthens the list to that many scans (ValueError if a pose names a later one).
+    """
+    if format == "kitti":
+        out: list = list(read_poses(path, "kitti"))
+    elif format == "tum":
+        poses = read_poses(path, "tum")
+        stamps = _rows(Path(path), 8)[:, 0]
+        whole = np.all(stamps == np.round(stamps)) and np.all(stamps >= 0)
+        if whole and len(set(stamps.tolist())) == len(stamps):
+            out = [None] * (int(stamps.max()) + 1)
+            for stamp, pose in zip(stamps, poses, strict=True):
+                out[int(stamp)] = pose
+        else:
+            out = list(poses)
+    elif format == "3dmatch":
+        records = read_poses(path, "3dmatch")
+        references = {i for i, _ in records}
+        if len(references) != 1:
+            raise ValueError(
+                f"{path}: records into several scans ({sorted(references)}), not one trajectory"
+            )
+        total = max(int(ln.split()[2]) for ln in _headers(Path(path)))
+        out = [None] * max(total, max(j for _, j in records) + 1)
+        for (_, j), pose in records.items():
+            out[j] = pose
+    else:
+        raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
+    if n_scans is not None:
+        if len(out) > n_scans and any(p is not None for p in out[n_scans:]):
+            raise ValueError(f"{path}: poses of more than {n_scans} scans")
+        out = (out + [None] * n_scans)[:n_scans]
+    return out
+
+
+def _headers(path: Path) -> list[str]:
+    """The header lines ``i j n`` of a ``.log`` file (every fifth non-blank line)."""
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip()]
+    return [ln for ln in lines[::5] if len(ln.split()) >= 3] or ["0 0 0"]
 
 
 def read_poses(

@@ -240,3 +240,97 @@ def test_survey_scans_keep_their_colours_through_the_command_line(tmp_path, caps
         np.testing.assert_array_equal(
             np.load(tmp_path / "d.npy"), model.transform(read_cloud(path))
         )
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_las_goes_back_out_on_the_input_s_grid_with_its_colours_and_run(tmp_path, suffix):
+    """A cloud written as LAS/LAZ ``like`` a survey file keeps that file's offsets,
+    scales and point format, its colours to 16 bits, and records the run in a VLR;
+    without a template the grid still holds survey coordinates to well under a
+    millimetre."""
+    import json
+
+    from o3d_rpointhop.io import LAS_RECORD, write_cloud
+
+    rng = np.random.default_rng(1)
+    points = OFFSET + np.round(rng.uniform(0, 50, (400, 3)), 3)
+    rgb = rng.integers(0, 65536, (400, 3), dtype=np.uint16)
+    _las(tmp_path / "in.las", points, rgb)
+    cloud = read_cloud(tmp_path / "in.las")
+    out = tmp_path / f"out{suffix}"
+    write_cloud(out, cloud, like=tmp_path / "in.las", provenance={"command": "test"})
+    written = laspy.read(str(out))
+    np.testing.assert_array_equal(written.header.offsets, OFFSET)
+    np.testing.assert_array_equal(written.header.scales, [0.001] * 3)
+    assert written.header.point_format.id == 3
+    np.testing.assert_array_equal(
+        np.c_[written.X, written.Y, written.Z], np.round((points - OFFSET) / 0.001)
+    )
+    np.testing.assert_array_equal(np.c_[written.red, written.green, written.blue], rgb)
+    (vlr,) = [v for v in written.header.vlrs if (v.user_id, v.record_id) == LAS_RECORD]
+    assert json.loads(vlr.record_data) == {"command": "test"}
+    plain = tmp_path / f"plain{suffix}"
+    write_cloud(plain, np.asarray(cloud.points))  # no template, no colours
+    back = read_cloud(plain)
+    assert np.abs(np.asarray(back.points) - points).max() < 1e-5 and not back.has_colors()
+
+
+def test_e57_and_ply_go_back_out(tmp_path):
+    """E57: one scan, survey coordinates kept to about 1e-7 of the cloud's extent
+    (pye57 writes single precision about the centre the pose restores), 8-bit colours;
+    PLY: the run recorded as a header comment that readers skip."""
+    import json
+
+    pytest.importorskip("pye57")
+    from o3d_rpointhop.io import read_provenance, write_cloud
+
+    rng = np.random.default_rng(2)
+    points = OFFSET + rng.uniform(0, 20, (300, 3))
+    colours = rng.random((300, 3))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud.colors = o3d.utility.Vector3dVector(colours)
+    write_cloud(tmp_path / "c.e57", cloud)
+    back = read_cloud(tmp_path / "c.e57")
+    assert np.abs(np.asarray(back.points) - points).max() < 2e-5
+    np.testing.assert_allclose(np.asarray(back.colors), np.round(colours * 255) / 255, atol=1e-9)
+    write_cloud(tmp_path / "c.ply", cloud, provenance={"seed": 3})
+    header = (tmp_path / "c.ply").read_bytes()[:300].decode("ascii", "replace").splitlines()
+    assert header[:2] == ["ply", "format binary_little_endian 1.0"]
+    assert json.loads(header[2].removeprefix("comment o3d-rpointhop ")) == {"seed": 3}
+    np.testing.assert_array_equal(np.asarray(read_cloud(tmp_path / "c.ply").points), points)
+    # A long record is split over comment lines Open3D's reader accepts (it aborts on a
+    # header line over 1024 characters), and read back whole.
+    long = {"config": {f"key{k}": "v" * 50 for k in range(100)}}
+    write_cloud(tmp_path / "long.ply", cloud, provenance=long)
+    lines = (tmp_path / "long.ply").read_bytes().split(b"end_header")[0].splitlines()
+    assert max(len(line) for line in lines) < 300
+    assert len(o3d.io.read_point_cloud(str(tmp_path / "long.ply")).points) == 300
+    assert read_provenance(tmp_path / "long.ply") == long
+    with pytest.raises(ValueError, match="cannot write format '.xyzq'"):
+        write_cloud(tmp_path / "c.xyzq", cloud)
+
+
+def test_reconstruct_writes_las_on_scan_0_s_grid(tmp_path):
+    """A folder of LAS scans rebuilt into a LAS file: scan 0's offsets and scales, the
+    scans' colours, the run in its VLR."""
+    import json
+
+    from helpers import partial_views
+
+    from o3d_rpointhop.cli import main
+    from o3d_rpointhop.io import LAS_RECORD, read_provenance
+
+    scans, _ = partial_views(3, seed=1)
+    for k, scan in enumerate(scans):
+        rgb = np.tile(np.array([[60000, 20000 * k, 0]], dtype=np.uint16), (len(scan), 1))
+        _las(tmp_path / f"s{k}.las", OFFSET + scan, rgb)
+    out = tmp_path / "merged.laz"
+    folder = tmp_path
+    assert main(["reconstruct", str(folder / "s*.las"), "-o", str(out)]) == 0
+    merged = laspy.read(str(out))
+    np.testing.assert_array_equal(merged.header.offsets, OFFSET)
+    assert len(merged.points) == sum(len(s) for s in scans)
+    assert set(np.unique(merged.green).tolist()) == {0, 20000, 40000}
+    (vlr,) = [v for v in merged.header.vlrs if (v.user_id, v.record_id) == LAS_RECORD]
+    assert json.loads(vlr.record_data)["command"] == "reconstruct"
+    assert read_provenance(out)["config"]["register"]["seed"] == 0

@@ -269,3 +269,68 @@ def test_kitti_keeps_a_line_for_a_scan_without_a_pose(tmp_path):
     (tmp_path / "half.txt").write_text("nan " * 6 + "0 " * 6 + "\n")
     with pytest.raises(ValueError, match="not a finite 4x4 matrix"):
         read_poses(tmp_path / "half.txt", "kitti")
+
+
+def test_trajectories_keep_scan_k_in_every_format_and_convert(tmp_path, capsys):
+    """Scan k's pose at scan k, scan 2 without one: KITTI marks it with nan, TUM and
+    .log leave it out and name the others; each reads back as the same list, and
+    ``poses convert`` turns any of the three into any other."""
+    from o3d_rpointhop.poses import read_trajectory, write_trajectory
+
+    poses = [np.eye(4), motion_matrix(*random_motion(1)), None, motion_matrix(*random_motion(2))]
+    for fmt in ("kitti", "tum", "3dmatch"):
+        path = tmp_path / f"t.{fmt}"
+        write_trajectory(path, poses, fmt)
+        back = read_trajectory(path, fmt, n_scans=4)
+        assert back[2] is None and len(back) == 4
+        for got, want in zip(back, poses, strict=True):
+            if want is not None:
+                np.testing.assert_allclose(got, want, atol=1e-8)
+    assert (tmp_path / "t.tum").read_text().split()[0::8] == ["0", "1", "3"]
+    headers = (tmp_path / "t.3dmatch").read_text().splitlines()[::5]
+    assert headers == ["0 0 4", "0 1 4", "0 3 4"]
+    assert read_trajectory(tmp_path / "t.3dmatch", "3dmatch")[2] is None  # n from the header
+    out = tmp_path / "out.txt"
+    args = ["poses", "convert", str(tmp_path / "t.tum"), str(out), "--from", "tum", "--to"]
+    assert main([*args, "kitti", "--scans", "5"]) == EXIT_OK
+    lines = out.read_text().splitlines()
+    assert len(lines) == 5 and lines[2] == lines[4] == " ".join(["nan"] * 12)
+    assert "3 of 5 scans' poses converted" in capsys.readouterr().out
+    np.testing.assert_allclose(read_trajectory(out, "kitti")[3], poses[3], atol=1e-8)
+    write_trajectory(tmp_path / "c.tum", poses, "tum", comment="made by a test")
+    assert (tmp_path / "c.tum").read_text().startswith("# made by a test\n")
+    assert read_trajectory(tmp_path / "c.tum", "tum")[3] is not None
+    with pytest.raises(ValueError, match="only TUM"):
+        write_trajectory(tmp_path / "c.txt", poses, "kitti", comment="x")
+    assert main([*args, "kitti", "--scans", "2"]) == EXIT_ERROR
+    assert "poses of more than 2 scans" in capsys.readouterr().err
+
+
+def test_reconstruct_writes_several_trajectories_in_one_run(tmp_path):
+    scans, _ = partial_views(3, seed=2)
+    names = []
+    for k, scan in enumerate(scans):
+        np.save(tmp_path / f"s{k}.npy", scan)
+        names.append(str(tmp_path / f"s{k}.npy"))
+    out = [tmp_path / "k.txt", tmp_path / "t.txt", tmp_path / "p.log"]
+    args = [
+        "reconstruct",
+        *names,
+        "-o",
+        str(tmp_path / "m.ply"),
+        "--poses",
+        str(tmp_path / "p.json"),
+    ]
+    for path, fmt in zip(out, ("kitti", "tum", "3dmatch"), strict=True):
+        args += ["--trajectory", str(path), "--trajectory-format", fmt]
+    assert main(args) == EXIT_OK
+    summary = json.loads((tmp_path / "p.json").read_text())
+    from o3d_rpointhop.poses import read_trajectory
+
+    for path, fmt in zip(out, ("kitti", "tum", "3dmatch"), strict=True):
+        for got, want in zip(read_trajectory(path, fmt), summary["poses"], strict=True):
+            np.testing.assert_allclose(got, np.array(want), atol=1e-7)
+    record = json.loads(out[1].read_text().splitlines()[0].removeprefix("# o3d-rpointhop "))
+    assert record == summary["provenance"]
+    bad = args[:-4] + ["--trajectory-format", "tum"]  # three files, two formats
+    assert main(bad) == 2

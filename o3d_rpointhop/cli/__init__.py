@@ -14,7 +14,18 @@ import sys
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import benchmark, config, demo, describe, evaluate, fit, reconstruct, register, view
+from . import (
+    benchmark,
+    config,
+    demo,
+    describe,
+    evaluate,
+    fit,
+    poses,
+    reconstruct,
+    register,
+    view,
+)
 from ._common import (
     EXIT_CODES,
     EXIT_ERROR,
@@ -40,7 +51,7 @@ __all__ = [
 ]
 
 #: The commands, in the order ``--help`` lists them.
-COMMANDS = (demo, register, evaluate, view, config, benchmark, reconstruct, fit, describe)
+COMMANDS = (demo, register, evaluate, view, config, benchmark, reconstruct, poses, fit, describe)
 
 
 class _Declared(Exception):

@@ -413,12 +413,17 @@ def config_of_record(path: str) -> dict[str, dict[str, Any]]:
     without one)."""
     import json
 
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise CommandError(f"{path}: no such file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise CommandError(f"{path}: not a JSON file ({exc})") from None
+    from ..io import read_provenance
+
+    if not Path(path).is_file():
+        raise CommandError(f"{path}: no such file")
+    if Path(path).suffix.lower() in (".las", ".laz", ".ply"):  # a cloud a command wrote
+        data = {"provenance": read_provenance(path)}
+    else:
+        try:
+            data = json.loads(Path(path).read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise CommandError(f"{path}: not a JSON file ({exc})") from None
     record = data.get("provenance") if isinstance(data, dict) else None
     if not isinstance(record, dict) or not isinstance(record.get("config"), dict):
         raise CommandError(

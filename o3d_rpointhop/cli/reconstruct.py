@@ -12,6 +12,7 @@ from ._common import (
     EXIT_UNRELIABLE,
     PROG,
     CommandError,
+    UsageError,
     add_config,
     add_descriptor,
     add_force,
@@ -54,15 +55,18 @@ def add_parser(commands) -> None:
     )
     p.add_argument(
         "--trajectory",
-        help="write the scans' poses (scan -> scan 0) as a trajectory: KITTI keeps line k "
-        "for scan k (12 nan for an unplaced scan); TUM (timestamp k) and 3dmatch (pair "
-        "0 k) name each scan and leave unplaced ones out",
+        action="append",
+        help="write the scans' poses (scan -> scan 0) as a trajectory (repeatable, one "
+        "file per format): KITTI keeps line k for scan k (12 nan for an unplaced scan); "
+        "TUM (timestamp k, the run recorded in a comment) and 3dmatch (record 0 k n) name "
+        "each scan and leave unplaced ones out",
     )
     p.add_argument(
         "--trajectory-format",
+        action="append",
         choices=["kitti", "tum", "3dmatch"],
-        default="kitti",
-        help="format of --trajectory (default: kitti; 3dmatch: a .log of (0, k) records)",
+        help="format of each --trajectory, in the same order (one format applies to "
+        "all; default: kitti)",
     )
     p.add_argument(
         "--result", help="save the whole result as JSON (MultiwayResult.load reads it back)"
@@ -149,11 +153,25 @@ def scan_paths(inputs: list[str]) -> list[str]:
     return out
 
 
+def _trajectories(paths: list[str], formats: list[str]) -> dict[str, str]:
+    """Each --trajectory file with its format (one format for all, or one each)."""
+    if not formats:
+        formats = ["kitti"]
+    if len(formats) == 1:
+        formats = formats * len(paths)
+    if paths and len(formats) != len(paths):
+        raise UsageError(
+            f"{len(paths)} --trajectory files and {len(formats)} --trajectory-format: give "
+            "one format for all or one for each"
+        )
+    return dict(zip(paths, formats, strict=False))
+
+
 def run(args: argparse.Namespace) -> int:
     import open3d as o3d
 
     from ..io import check_output_path, read_cloud, write_cloud
-    from ..poses import write_pose_graph, write_poses
+    from ..poses import write_pose_graph, write_trajectory
     from ..registration import register_multiway
 
     # Settings, model and outputs are checked before any scan is read.
@@ -170,7 +188,8 @@ def run(args: argparse.Namespace) -> int:
     options = multiway_options(config, flags, descriptor)
     used = used_config(options, section, {"multiway": {"min_fitness": options["min_fitness"]}})
     record = run_record("reconstruct", used, descriptor)
-    outputs = (args.output, args.poses, args.mesh, args.pose_graph, args.trajectory, args.result)
+    trajectories = _trajectories(args.trajectory or [], args.trajectory_format or [])
+    outputs = (args.output, args.poses, args.mesh, args.pose_graph, *trajectories, args.result)
     for out in outputs:
         if out:
             check_output_path(out)
@@ -181,26 +200,16 @@ def run(args: argparse.Namespace) -> int:
     result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, progress=None, **options)
     merged = result.merge(scans, voxel_size=args.output_voxel_size, colour=args.colour_by_scan)
     check_size(args.output, cloud_bytes(merged), args.force, "downsample with --output-voxel-size")
-    write_cloud(args.output, merged)
+    # In scan 0's frame: a LAS/LAZ output keeps scan 0's grid (offsets, scales).
+    write_cloud(args.output, merged, like=args.scans[0], provenance=record)
     summary = {**result.as_dict(list(args.scans)), "provenance": record}
     if args.poses:
         Path(args.poses).write_text(json.dumps(summary, indent=2))
     if args.pose_graph:
         write_pose_graph(args.pose_graph, result.pose_graph)
-    if args.trajectory:
-        # Line k is scan k in KITTI (a line of nan for an unplaced scan); TUM's
-        # timestamp k and the .log's pair (0, k) name the scan, so unplaced ones are
-        # left out there.
-        kitti = args.trajectory_format == "kitti"
-        placed = [k for k, pose in enumerate(result.poses) if kitti or pose is not None]
-        write_poses(
-            args.trajectory,
-            [result.poses[k] for k in placed],
-            args.trajectory_format,
-            timestamps=[float(k) for k in placed],
-            pairs=[(0, k) for k in placed],
-            n_fragments=len(scans),
-        )
+    for path, fmt in trajectories.items():
+        comment = f"o3d-rpointhop {json.dumps(record)}" if fmt == "tum" else None
+        write_trajectory(path, result.poses, fmt, comment=comment)
     if args.result:
         result.save(args.result, provenance=record)
     if args.mesh:

@@ -100,6 +100,10 @@ def add_parser(commands) -> None:
     p.set_defaults(func=run)
 
 
+def _is_las(path: str) -> bool:
+    return Path(path).suffix.lower() in (".las", ".laz")
+
+
 def run(args: argparse.Namespace) -> int:
     from ..io import check_output_path, read_cloud, write_cloud
     from ..poses import read_matrix
@@ -143,7 +147,9 @@ def run(args: argparse.Namespace) -> int:
     if args.output:
         aligned = type(source)(source).transform(result.transformation)  # a copy
         check_size(args.output, cloud_bytes(aligned), args.force, "downsample the source")
-        write_cloud(args.output, aligned)
+        # In the target's frame: a LAS/LAZ output keeps the target's grid when it is one.
+        like = args.target if _is_las(args.target) else args.source
+        write_cloud(args.output, aligned, like=like, provenance=record)
         summary["aligned_cloud"] = args.output
     if args.transform:
         if args.transform.lower().endswith(".json"):

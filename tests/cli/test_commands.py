@@ -102,8 +102,8 @@ def test_reconstruct_reaches_every_setting_and_records_its_run(tmp_path, capsys)
     repeats the run to the bit. A refinement multiway cannot use is refused before any
     scan is read."""
     from o3d_rpointhop import register_multiway
-    from o3d_rpointhop.registration import RegistrationSettings
     from o3d_rpointhop.cli import EXIT_OK
+    from o3d_rpointhop.registration import RegistrationSettings
     from o3d_rpointhop.registration.steps import RANSACGlobal
 
     scans, _ = partial_views(3, seed=3)
