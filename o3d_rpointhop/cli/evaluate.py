@@ -28,7 +28,12 @@ def add_parser(commands) -> None:
     p.add_argument("target")
     p.add_argument("--transform", required=True, help="text file with the 4x4 transformation")
     p.add_argument("--truth", help="text file with the ground-truth 4x4 transformation")
-    p.add_argument("--distance", type=float, help="correspondence distance (default: 1 resolution)")
+    p.add_argument(
+        "--distance",
+        type=float,
+        help="correspondence distance (default: where register measures its fitness, the "
+        "last ICP distance: 0.5 resolution)",
+    )
     p.add_argument("--voxel-size", type=float, help="the resolution (default: auto)")
     add_json(p)
     p.set_defaults(func=run)

@@ -40,7 +40,9 @@ def evaluate(
         Maps source points into the target frame (Open3D's convention).
     distance : float, default=None
         Correspondence distance of the fitness; ``None`` is the settings'
-        ``evaluation_distance`` (1 resolution).
+        ``fitness_distance`` (the last ICP pass's, 0.5 resolution by default), where
+        :func:`~o3d_rpointhop.register` measures its own result: the same
+        transformation gets the same fitness from both.
     voxel_size : float or "auto", default="auto"
         The resolution, as in :func:`~o3d_rpointhop.register`.
     settings : RegistrationSettings, default=None
@@ -67,7 +69,7 @@ def evaluate(
     if distance is not None and not is_positive_number(distance):
         raise ValueError(f"distance must be a positive number, got {distance!r}")
     context = RegistrationContext(source, target, voxel_size=voxel_size, settings=settings)
-    distance = float(distance or context.settings.evaluation_distance)
+    distance = float(distance or context.settings.fitness_distance)
     local = context.to_local(matrix)
     quality = assess(context, local, distance, assess_ambiguity)
     seconds = time.perf_counter() - start

@@ -151,6 +151,13 @@ class RegistrationSettings:
         return tuple(self._times(f) for f in self.icp_factors)
 
     @property
+    def fitness_distance(self) -> float:
+        """Where a result's fitness is measured: the last ICP pass's distance, at which
+        ``register()``'s default chain ends and :func:`~o3d_rpointhop.evaluate` measures
+        by default, so that both report the same fitness for the same transformation."""
+        return self.icp_distances[-1]
+
+    @property
     def normal_radius(self) -> float:
         return self._times(self.normal_radius_factor)
 

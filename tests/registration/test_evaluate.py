@@ -39,3 +39,34 @@ def test_a_bad_init_is_named_init(cloud):
 def test_distance_must_be_a_positive_number(cloud, distance):
     with pytest.raises(ValueError, match="distance must be a positive number"):
         evaluate(cloud, cloud, np.eye(4), distance=distance)
+
+
+def test_one_fitness_register_and_evaluate_agree():
+    """The same transformation gets the same fitness from register() and evaluate()
+    (both measure at the settings' fitness_distance), in the library and on the
+    command line."""
+    target = make_object(1500, shape_seed=5, sample_seed=1)
+    source = make_object(1500, shape_seed=5, sample_seed=2) + [0.2, 0.0, 0.0]
+    result = register(source, target)
+    scored = evaluate(source, target, result.transformation)
+    assert scored.distance == result.distance
+    assert scored.fitness == pytest.approx(result.fitness, abs=1e-12)
+    assert scored.inlier_rmse == pytest.approx(result.inlier_rmse, rel=1e-9)
+
+
+def test_one_fitness_on_the_command_line(tmp_path, capsys):
+    import json
+
+    from o3d_rpointhop.cli import main
+
+    target = make_object(1500, shape_seed=5, sample_seed=1)
+    source = make_object(1500, shape_seed=5, sample_seed=2) + [0.2, 0.0, 0.0]
+    np.save(tmp_path / "s.npy", source)
+    np.save(tmp_path / "t.npy", target)
+    files = [str(tmp_path / "s.npy"), str(tmp_path / "t.npy")]
+    main(["register", *files, "--transform", str(tmp_path / "T.txt"), "--json"])
+    registered = json.loads(capsys.readouterr().out)
+    main(["evaluate", *files, "--transform", str(tmp_path / "T.txt"), "--json"])
+    evaluated = json.loads(capsys.readouterr().out)
+    assert evaluated["distance"] == registered["distance"]
+    assert abs(evaluated["fitness"] - registered["fitness"]) < 1e-6  # the matrix printed to 1e-10
