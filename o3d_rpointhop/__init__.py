@@ -12,9 +12,14 @@ and each name loads its module on first use.
 from __future__ import annotations
 
 import importlib
+import logging
 from typing import TYPE_CHECKING, Any
 
 from ._version import __version__
+
+# The library logs what it does under "o3d_rpointhop" (reading files, each registration
+# step, multiway's pairs and edges); an application chooses where it goes.
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 #: Every re-exported name and the module that defines it.
 _EXPORTS = {

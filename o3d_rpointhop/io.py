@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import threading
 import warnings
@@ -12,6 +13,8 @@ import numpy as np
 import open3d as o3d
 
 from ._utils.validation import PrecisionWarning, as_points, coarse_float32
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "read_cloud",
@@ -312,6 +315,20 @@ def read_cloud(
     Safe to call from several threads at once: nothing process-wide is redirected (only
     Open3D's own warnings are silenced while a read runs).
     """
+    cloud = _read_cloud(path, mesh_points)
+    extras = [
+        n for n, has in (("normals", cloud.has_normals()), ("colours", cloud.has_colors())) if has
+    ]
+    log.info(
+        "read %s: %d points%s",
+        path,
+        len(cloud.points),
+        f" with {' and '.join(extras)}" if extras else "",
+    )
+    return cloud
+
+
+def _read_cloud(path: str | os.PathLike, mesh_points: int) -> o3d.geometry.PointCloud:
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{path}: is a directory, not a point cloud file")

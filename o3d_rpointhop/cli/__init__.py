@@ -10,7 +10,9 @@ once in :mod:`._common`.
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
+import warnings
 from collections.abc import Sequence
 
 from .._version import __version__
@@ -77,6 +79,21 @@ def build_parser(
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=0,
+        help="say what is done on stderr: -v each stage (files read, steps, edges), -vv "
+        "every detail (the library's 'o3d_rpointhop' logger at INFO / DEBUG)",
+    )
+    parser.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="errors only on stderr: no warnings (the exit status still says when a "
+        "result is flagged)",
+    )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     chosen = _chosen(argv)
@@ -99,11 +116,36 @@ def build_parser(
     return parser
 
 
+class _Lines(logging.Formatter):
+    """``o3d-rpointhop: warning: ...``, as the command line's other lines."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"{PROG}: {record.levelname.lower()}: {record.getMessage()}"
+
+
+def _log_to_stderr(verbose: int, quiet: bool) -> None:
+    """The library's logger on stderr at the level -v / -q ask for (WARNING without
+    either); one handler, whichever ``main`` call set it last."""
+    logger = logging.getLogger("o3d_rpointhop")
+    for handler in [h for h in logger.handlers if isinstance(h.formatter, _Lines)]:
+        logger.removeHandler(handler)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_Lines())
+    logger.addHandler(handler)
+    levels = [logging.WARNING, logging.INFO, logging.DEBUG]
+    logger.setLevel(logging.ERROR if quiet else levels[min(verbose, 2)])
+    logger.propagate = False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(argv)
     args = parser.parse_args(argv)
+    _log_to_stderr(args.verbose, args.quiet)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            if args.quiet:  # the library's warnings too
+                warnings.simplefilter("ignore")
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130

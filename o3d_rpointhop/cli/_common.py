@@ -4,7 +4,7 @@ and the model and descriptor a command is given."""
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 
 PROG = "o3d-rpointhop"
 #: The shipped models' names (``descriptors.PRETRAINED_MODELS``, written out so that
@@ -220,20 +220,23 @@ def descriptor_of(args: argparse.Namespace, config: dict | None = None):
     return descriptor
 
 
+#: Where the commands' warnings go (stderr, unless -q; see ``cli.main``).
+log = logging.getLogger("o3d_rpointhop.cli")
+
+
 def flag_status(result) -> int:
-    """Exit status of a finished registration: 3, with a line on stderr, when flagged."""
+    """Exit status of a finished registration: 3, with a warning on stderr, when
+    flagged."""
     if not result.converged:
-        print(
-            f"{PROG}: warning: the result did not converge (fitness {result.fitness:.3f}): "
-            "no overlap, or a chance alignment",
-            file=sys.stderr,
+        log.warning(
+            f"the result did not converge (fitness {result.fitness:.3f}): no overlap, or a "
+            "chance alignment"
         )
         return EXIT_UNRELIABLE
     if result.ambiguous:
-        print(
-            f"{PROG}: warning: the result is ambiguous: turned by 180 degrees it fits about "
-            "as well (a symmetric shape or a featureless plane)",
-            file=sys.stderr,
+        log.warning(
+            "the result is ambiguous: turned by 180 degrees it fits about as well (a "
+            "symmetric shape or a featureless plane)"
         )
         return EXIT_UNRELIABLE
     return EXIT_OK

@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 from ._common import (
     EXIT_OK,
     EXIT_UNRELIABLE,
-    PROG,
     CommandError,
     UsageError,
     add_config,
@@ -22,6 +20,7 @@ from ._common import (
     check_size,
     cloud_bytes,
     global_points,
+    log,
     positive_or_auto,
 )
 from ._config import descriptor_from, load_config, multiway_options, run_record, used_config
@@ -223,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if result.unconnected:
         names = ", ".join(summary["unconnected"])
-        print(f"{PROG}: warning: unconnected (left out): {names}", file=sys.stderr)
+        log.warning(f"unconnected (left out): {names}")
     if args.view:
         from ..viewer import show_multiway
 

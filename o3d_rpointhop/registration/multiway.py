@@ -18,6 +18,7 @@ that no kept edge joins to scan 0 are reported as unconnected and get no pose.
 
 from __future__ import annotations
 
+import logging
 import time
 import warnings
 from numbers import Integral, Real
@@ -43,6 +44,8 @@ from .settings import RegistrationSettings
 from .steps import PointToPlaneICP
 
 __all__ = ["register_multiway"]
+
+log = logging.getLogger(__name__)
 
 reg = o3d.pipelines.registration
 
@@ -312,6 +315,13 @@ def register_multiway(
     )
     features = [p.features for p in prepared]
     candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
+    log.info(
+        "%d scans prepared at resolution %.4g; screening %d candidate pairs with %s",
+        len(points),
+        voxel,
+        len(candidates),
+        global_method if isinstance(global_method, str) else type(global_method).__name__,
+    )
     results = parallel_map(
         _register_pair,
         [
@@ -329,6 +339,9 @@ def register_multiway(
         for pair, result in zip(candidates, results, strict=True)
         if result[1] >= min_fitness
     }
+    log.info("%d of %d pairs fit (edge fitness >= %.2f)", len(edges), len(candidates), min_fitness)
+    for (i, j), (_, fitness, _) in zip(candidates, results, strict=True):
+        log.debug("pair %d-%d: edge fitness %.3f", i, j, fitness)
     tree = spanning_tree(edges, len(points))
     poses = poses_from_tree(tree, edges, len(points))
     graph, poses, kept = optimise(edges, tree, poses, settings)
@@ -363,6 +376,12 @@ def register_multiway(
         tree = [e for e in tree if e in refined]
         graph, poses, kept = optimise(refined, tree, poses, settings)
     unconnected = [k for k, p in enumerate(poses) if p is None]
+    log.info(
+        "pose graph: %d edges kept, %d of %d scans placed",
+        len(kept),
+        len(points) - len(unconnected),
+        len(points),
+    )
     poses = [None if p is None else from_centred(p, origin) for p in poses]
     pairs = {pair: (from_centred(t, origin), f) for pair, (t, f) in pairs.items()}
     return MultiwayResult(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 import warnings
 from numbers import Integral, Real
@@ -39,6 +40,8 @@ from .steps import (
     SVDGlobal,
     SymmetryCheck,
 )
+
+log = logging.getLogger(__name__)
 
 __all__ = ["RegistrationPipeline", "register", "GLOBAL_METHODS", "REFINE_METHODS"]
 
@@ -331,8 +334,26 @@ class RegistrationPipeline(_BaseComposition):
             current = outcome.transformation  # in the context's centred frame
             outcome.transformation = context.to_world(current)
             results.append(outcome)
+            log.debug(
+                "step %s: fitness %.3f, inlier RMSE %.4g within %.4g, %.3f s",
+                name,
+                outcome.fitness,
+                outcome.inlier_rmse,
+                outcome.distance,
+                outcome.seconds,
+            )
         distance = results[-1].distance
         quality = assess(context, current, distance, ambiguity)
+        log.info(
+            "registered at resolution %.4g: fitness %.3f within %.4g, converged %s, "
+            "ambiguous %s, %.2f s",
+            context.voxel_size,
+            quality.final.fitness,
+            distance,
+            quality.converged,
+            quality.ambiguous,
+            time.perf_counter() - start,
+        )
         warn_flags(quality, distance, stacklevel)
         return RegistrationResult(
             transformation=context.to_world(current),

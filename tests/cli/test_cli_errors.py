@@ -164,3 +164,25 @@ def test_debug_shows_the_traceback_where_an_unexpected_error_says_how(
     assert "'o3d-rpointhop --debug ...' shows where" in err and "Traceback" not in err
     with pytest.raises(RuntimeError, match="something broke"):
         main(["--debug", *args])
+
+
+def test_verbose_says_what_is_done_and_quiet_says_only_errors(tmp_path, capsys):
+    """-v logs each file read and the registration's outcome, -vv each step; -q drops
+    the flagged result's warning while the exit status still says it."""
+    np.save(tmp_path / "s.npy", OBJECT)
+    np.save(tmp_path / "far.npy", OBJECT + [50.0, 0.0, 0.0])
+    pair = [str(tmp_path / "s.npy"), str(tmp_path / "s.npy")]
+    assert main(["-v", "register", *pair]) == 0
+    err = capsys.readouterr().err
+    assert f"o3d-rpointhop: info: read {pair[0]}: {len(OBJECT)} points" in err
+    assert "o3d-rpointhop: info: registered at resolution" in err and "step " not in err
+    assert main(["-vv", "register", *pair]) == 0
+    assert "o3d-rpointhop: debug: step global: fitness" in capsys.readouterr().err
+    assert main(["register", *pair]) == 0
+    assert capsys.readouterr().err == ""
+    # The source 50 units away and ICP alone: nothing overlaps, flagged.
+    bad = [str(tmp_path / "far.npy"), pair[1], "--global", "none"]
+    assert main(["register", *bad]) == 3
+    assert "o3d-rpointhop: warning: the result did not converge" in capsys.readouterr().err
+    assert main(["-q", "register", *bad]) == 3
+    assert capsys.readouterr().err == ""
