@@ -16,6 +16,30 @@ from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import data_home, make_blob, make_object
 
 
+def _data_line() -> str:
+    try:
+        return f"real data: {data_home()}"
+    except FileNotFoundError as exc:
+        return (
+            f"real data: not found, the tests marked realdata were skipped ({exc}; set "
+            "O3D_RPOINTHOP_DATA to point at it)"
+        )
+
+
+def pytest_report_header(config) -> str:
+    """At the top of a verbose run: where the real data was found, or where it was
+    looked for and how to point at it."""
+    return _data_line()
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    """Once, at the end of every run (``-q`` included), when the real data was not
+    found: where it was looked for and how to point at it."""
+    line = _data_line()
+    if "not found" in line:
+        terminalreporter.write_line(line)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """The real data folder (``data_home()``'s lookup); skips the test without it."""

@@ -116,6 +116,8 @@ def test_ci_runs_the_readme_test_command():
     commands = [line for line in readme.splitlines() if line.startswith("sh scripts/setup.sh")]
     assert len(commands) == 2, "the quick start has exactly two commands"
     assert "pytest" in commands[1] and "grep" in ci and "pytest" in ci
+    # The main job sets up what the demo needs; only the tests' set-up adds Chromium.
+    assert "--test" not in commands[0] and "--test" in commands[1]
     assert "scripts/check_wheel.sh" in ci and (ROOT / "scripts" / "check_wheel.sh").is_file()
 
 

@@ -20,7 +20,7 @@ sync_api = pytest.importorskip("playwright.sync_api")
 CHROMIUM = shutil.which("chromium")
 if CHROMIUM is None:
     pytest.skip(
-        "Debian's chromium is not installed (scripts/setup.sh installs it)", allow_module_level=True
+        "Debian's chromium is not installed (scripts/setup.sh --test installs it)", allow_module_level=True
     )
 
 # The flags a sandboxed, offline machine needs (no background connections).
