@@ -15,11 +15,21 @@ import numpy as np
 from .open3d_interop import to_point_cloud
 from .registration.result import SCAN_COLOURS
 
-__all__ = ["DISPLAY_POINTS", "show_multiway", "show_registration"]
+__all__ = ["COLOURS", "DISPLAY_POINTS", "served_address", "show_multiway", "show_registration"]
 
 #: Most points drawn per cloud (an even stride through larger clouds).
 DISPLAY_POINTS = 200_000
-_SOURCE, _TARGET, _ALIGNED = (255, 127, 14), (31, 119, 180), (44, 160, 44)
+#: What each kind of thing is drawn in (0-255 RGB; clouds with their own colours keep
+#: them, except the aligned source): no two alike, and the panel's legend says which.
+COLOURS = {
+    "source": (255, 127, 14),
+    "target": (31, 119, 180),
+    "aligned": (44, 160, 44),
+    "matches_kept": (188, 189, 34),
+    "matches_other": (214, 39, 40),
+    "correspondences": (148, 103, 189),
+    "pose_graph": (20, 20, 20),
+}
 
 
 def _viser():
@@ -70,9 +80,49 @@ def _frame(server, extent: float) -> None:
     server.initial_camera.far = extent * 100
 
 
-def _serve(server, block: bool):
+def _own_address() -> str:
+    """This machine's address on its default route (a UDP socket is pointed there, which
+    sends nothing), else its host name."""
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("192.0.2.1", 9))  # TEST-NET-1: never answered, never sent to
+            return probe.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
+
+
+def served_address(host: str, port: int) -> str:
+    """The address a browser opens for a server bound to ``host``: the host itself, or
+    for every interface (``0.0.0.0``, ``::``, ``""``) this machine's address on its
+    default route, which other machines reach (the local address works on this one)."""
+    if host in ("0.0.0.0", "::", ""):
+        return (
+            f"http://{_own_address()}:{port} (every interface; on this machine "
+            f"http://127.0.0.1:{port})"
+        )
+    shown = f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}"
+
+
+def _legend(items: list[tuple[str, tuple[int, int, int]]]) -> str:
+    """The panel's legend: a coloured square and a label per drawn thing."""
+    import html
+
+    rows = "".join(
+        f'<div style="display:flex;align-items:center;gap:6px;margin:2px 0">'
+        f'<span style="display:inline-block;width:12px;height:12px;'
+        f'background:rgb{tuple(colour)}"></span>{html.escape(label)}</div>'
+        for label, colour in items
+    )
+    return f'<div style="font-size:0.85em"><b>Legend</b>{rows}</div>'
+
+
+def _serve(server, block: bool, host: str = "127.0.0.1"):
     if block:
-        print(f"viewer: http://localhost:{server.get_port()} (Ctrl-C to stop)", flush=True)
+        address = served_address(host, server.get_port())
+        print(f"viewer: {address} (Ctrl-C to stop)", flush=True)
         try:
             server.sleep_forever()
         except KeyboardInterrupt:
@@ -139,16 +189,20 @@ def show_registration(
     limit = DISPLAY_POINTS
     aligned = to_point_cloud(source, "source").transform(transformation)
     handles = {}
-    for name, cloud, colour in (
-        ("source", src, _SOURCE),
-        ("target", tgt, _TARGET),
-        ("aligned", aligned, _ALIGNED),
+    legend = []
+    for name, label, cloud in (
+        ("source", "source (as given)", src),
+        ("target", "target", tgt),
+        ("aligned", "aligned source", aligned),
     ):
+        colour = COLOURS[name]
         pts, own = _points(cloud, origin, limit)
+        kept_own = own is not None and name != "aligned"
+        legend.append((label + (" (its own colours)" if kept_own else ""), colour))
         handles[name] = server.scene.add_point_cloud(
             f"/{name}",
             pts.astype(np.float32),
-            colour if own is None or name == "aligned" else own,
+            own if kept_own else colour,
             point_size=size,
             precision="float32",
         )
@@ -161,8 +215,8 @@ def show_registration(
         ends = step.matches - origin
         inside = np.asarray(step.match_inliers, dtype=bool)
         for label, keep, colour, node in (
-            ("global step: matches it kept", inside, (44, 160, 44), "/matches_kept"),
-            ("global step: other matches", ~inside, (214, 39, 40), "/matches_other"),
+            ("global step: matches it kept", inside, COLOURS["matches_kept"], "/matches_kept"),
+            ("global step: other matches", ~inside, COLOURS["matches_other"], "/matches_other"),
         ):
             chosen = ends[keep][:: max(1, int(np.ceil(keep.sum() / max_lines)))]
             if len(chosen):
@@ -173,6 +227,7 @@ def show_registration(
                     thickness=size / 4,
                 )
                 toggles.append((label, handle, False))
+                legend.append((label, colour))
     pairs = np.asarray(getattr(result, "correspondence_set", np.empty((0, 2))), dtype=np.int64)
     if len(pairs):
         pairs = pairs[:: max(1, int(np.ceil(len(pairs) / max_lines)))]
@@ -184,16 +239,21 @@ def show_registration(
             axis=1,
         )
         handle = server.scene.add_line_segments(
-            "/correspondences", ends.astype(np.float32), (148, 103, 189), thickness=size / 4
+            "/correspondences",
+            ends.astype(np.float32),
+            COLOURS["correspondences"],
+            thickness=size / 4,
         )
         toggles.append(("inlier correspondences", handle, False))
+        legend.append(("inlier correspondences", COLOURS["correspondences"]))
     server.gui.add_markdown(_summary(result, len(pairs), step))
+    server.gui.add_html(_legend(legend))
     _toggle(server, "source (as given)", [handles["source"]], initial=False)
     _toggle(server, "target", [handles["target"]])
     _toggle(server, "aligned source", [handles["aligned"]])
     for label, handle, initial in toggles:
         _toggle(server, label, [handle], initial=initial)
-    return _serve(server, block)
+    return _serve(server, block, host)
 
 
 def _summary(result, n_lines: int, step=None) -> str:
@@ -227,10 +287,11 @@ def show_multiway(
     port: int = 8080,
     point_size: float | None = None,
     block: bool = True,
+    names: list[str] | None = None,
 ):
     """Serve a reconstruction: every placed scan in its own colour (toggled one by one),
     the pose graph's kept edges as lines between the scans' centres, and the result's
-    numbers in the panel.
+    numbers and a legend in the panel.
 
     Parameters
     ----------
@@ -239,6 +300,8 @@ def show_multiway(
     result : MultiwayResult
     host, port, point_size, block
         As in :func:`show_registration` (``point_size=None``: the common resolution).
+    names : list of str, default=None
+        What to call each scan (its file name, say); ``None``: ``scan 0``, ``scan 1``...
 
     Returns
     -------
@@ -247,6 +310,9 @@ def show_multiway(
     viser = _viser()
     if len(scans) != len(result.poses):
         raise ValueError(f"{len(result.poses)} scans were registered, got {len(scans)}")
+    names = [f"scan {k}" for k in range(len(scans))] if names is None else list(names)
+    if len(names) != len(scans):
+        raise ValueError(f"{len(names)} names for {len(scans)} scans")
     placed = {}
     for k, (scan, pose) in enumerate(zip(scans, result.poses, strict=True)):
         if pose is not None:
@@ -268,13 +334,15 @@ def show_multiway(
         handle = server.scene.add_point_cloud(
             f"/scan_{k}", pts.astype(np.float32), colour, point_size=size, precision="float32"
         )
-        boxes.append((f"scan {k}", handle))
+        boxes.append((names[k], handle, colour))
     edges = [(i, j) for i, j in result.edges if i in centres and j in centres]
     graph = []
     if edges:
         ends = np.array([[centres[i], centres[j]] for i, j in edges], dtype=np.float32)
         graph.append(
-            server.scene.add_line_segments("/pose_graph", ends, (20, 20, 20), thickness=2 * size)
+            server.scene.add_line_segments(
+                "/pose_graph", ends, COLOURS["pose_graph"], thickness=2 * size
+            )
         )
     rows = [
         "**Reconstruction**",
@@ -284,10 +352,14 @@ def show_multiway(
         f"- resolution {result.voxel_size:.4g}, {result.seconds:.1f} s",
     ]
     if result.unconnected:
-        rows.append(f"- unconnected: {', '.join(str(k) for k in result.unconnected)}")
+        rows.append(f"- unconnected: {', '.join(names[k] for k in result.unconnected)}")
     server.gui.add_markdown("\n".join(rows))
-    for label, handle in boxes:
+    legend = [(label, colour) for label, _, colour in boxes]
+    if graph:
+        legend.append(("pose graph edges", COLOURS["pose_graph"]))
+    server.gui.add_html(_legend(legend))
+    for label, handle, _ in boxes:
         _toggle(server, label, [handle])
     if graph:
         _toggle(server, "pose graph edges", graph)
-    return _serve(server, block)
+    return _serve(server, block, host)

@@ -226,5 +226,6 @@ def run(args: argparse.Namespace) -> int:
     if args.view:
         from ..viewer import show_multiway
 
-        show_multiway(scans, result, host=args.host, port=args.port)
+        names = [Path(p).name for p in args.scans]
+        show_multiway(scans, result, host=args.host, port=args.port, names=names)
     return EXIT_UNRELIABLE if result.unconnected else EXIT_OK

@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     kind = _kind(path) if path.suffix.lower() == ".json" else None
     serve = dict(host=args.host, port=args.port)
     if kind == "MultiwayResult":
-        show_multiway(clouds, MultiwayResult.load(path), **serve)
+        names = [Path(c).name for c in args.clouds]
+        show_multiway(clouds, MultiwayResult.load(path), names=names, **serve)
         return 0
     if len(clouds) != 2:
         raise CommandError(f"a pair result needs two clouds (source, target), got {len(clouds)}")

@@ -20,7 +20,8 @@ sync_api = pytest.importorskip("playwright.sync_api")
 CHROMIUM = shutil.which("chromium")
 if CHROMIUM is None:
     pytest.skip(
-        "Debian's chromium is not installed (scripts/setup.sh --test installs it)", allow_module_level=True
+        "Debian's chromium is not installed (scripts/setup.sh --test installs it)",
+        allow_module_level=True,
     )
 
 # The flags a sandboxed, offline machine needs (no background connections).
@@ -84,7 +85,7 @@ def test_a_pair_registration_is_drawn_with_its_panel_and_toggles(browser):
         shot = page.screenshot()
         green = _share_near(shot, (44, 160, 44))
         assert green > 0.002, green  # the aligned source is on screen
-        page.get_by_text("aligned source").first.click()  # toggled off
+        page.get_by_text("aligned source").last.click()  # its toggle (the legend's is first)
         page.wait_for_timeout(1000)
         assert _share_near(page.screenshot(), (44, 160, 44)) < green / 4
     finally:

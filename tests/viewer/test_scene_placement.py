@@ -68,3 +68,65 @@ def test_each_scan_is_drawn_where_its_pose_sends_it(drawn):
         expected = apply_transform(scans[k], result.poses[k])
         gap, _ = cKDTree(expected).query(drawn[f"/scan_{k}"] + offset)
         assert gap.max() < 1e-4, k
+
+
+@pytest.fixture
+def panel(monkeypatch):
+    """The legend HTML and the toggles' labels a viewer adds to its panel."""
+    from viser import _gui_api
+
+    added = {"html": [], "checkbox": []}
+    html, checkbox = _gui_api.GuiApi.add_html, _gui_api.GuiApi.add_checkbox
+
+    def record_html(self, content, *args, **kwargs):
+        added["html"].append(content)
+        return html(self, content, *args, **kwargs)
+
+    def record_checkbox(self, label, *args, **kwargs):
+        added["checkbox"].append(label)
+        return checkbox(self, label, *args, **kwargs)
+
+    monkeypatch.setattr(_gui_api.GuiApi, "add_html", record_html)
+    monkeypatch.setattr(_gui_api.GuiApi, "add_checkbox", record_checkbox)
+    return added
+
+
+def test_a_legend_with_distinct_colours_and_scans_named_by_file(drawn, panel):
+    """Every drawn kind in its own colour, each named in the legend with that colour;
+    a reconstruction's scans toggled and listed under the names given."""
+    from o3d_rpointhop.viewer import COLOURS, show_multiway, show_registration
+
+    assert len(set(COLOURS.values())) == len(COLOURS)
+    target = make_object(1500, shape_seed=4, sample_seed=1)
+    source = make_object(1500, shape_seed=4, sample_seed=2) + [0.2, 0.0, 0.0]
+    result = register(source, target)
+    show_registration(source, target, result, port=free_port(), block=False).stop()
+    (legend,) = panel["html"]
+    for label, kind in (
+        ("aligned source", "aligned"),
+        ("target", "target"),
+        ("global step: matches it kept", "matches_kept"),
+        ("inlier correspondences", "correspondences"),
+    ):
+        assert label in legend and f"rgb{COLOURS[kind]}" in legend, label
+    scans, _ = partial_views(3, seed=1)
+    names = ["north.las", "east.las", "roof.las"]
+    multiway = register_multiway(scans, seed=0)
+    show_multiway(scans, multiway, port=free_port(), block=False, names=names).stop()
+    legend = panel["html"][-1]
+    assert all(name in legend for name in names) and "pose graph edges" in legend
+    assert set(names) <= set(panel["checkbox"]) and "scan 0" not in panel["checkbox"]
+    with pytest.raises(ValueError, match="2 names for 3 scans"):
+        show_multiway(scans, multiway, port=free_port(), block=False, names=names[:2])
+
+
+def test_the_address_printed_is_the_one_served():
+    from o3d_rpointhop.viewer import served_address
+
+    assert served_address("127.0.0.1", 8080) == "http://127.0.0.1:8080"
+    assert served_address("192.168.1.7", 9000) == "http://192.168.1.7:9000"
+    assert served_address("::1", 8080) == "http://[::1]:8080"
+    anywhere = served_address("0.0.0.0", 8080)  # another machine's way in, and this one's
+    assert anywhere.startswith("http://") and anywhere.split()[0].endswith(":8080")
+    assert "every interface" in anywhere and "http://127.0.0.1:8080" in anywhere
+    assert not anywhere.startswith("http://0.0.0.0")
