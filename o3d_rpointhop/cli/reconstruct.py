@@ -28,8 +28,6 @@ from .view import add_view
 
 
 def add_parser(commands) -> None:
-    from ..registration.pipeline import GLOBAL_METHODS
-
     p = commands.add_parser(
         "reconstruct",
         help="rebuild an object or scene from unposed scans (multiway registration)",
@@ -62,7 +60,8 @@ def add_parser(commands) -> None:
     )
     p.add_argument(
         "--trajectory-format",
-        action="append",
+        action="extend",
+        nargs="+",
         choices=["kitti", "tum", "3dmatch"],
         help="format of each --trajectory, in the same order (one format applies to "
         "all; default: kitti)",
@@ -70,6 +69,8 @@ def add_parser(commands) -> None:
     p.add_argument(
         "--result", help="save the whole result as JSON (MultiwayResult.load reads it back)"
     )
+    from ..registration.pipeline import GLOBAL_METHODS  # declared in full: this command runs
+
     add_descriptor(p)
     add_model(p, default="the one-hop object model")
     p.add_argument(
