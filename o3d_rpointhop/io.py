@@ -189,6 +189,20 @@ def _read_las(path: Path) -> o3d.geometry.PointCloud:
     return _cloud(as_points(points, name=str(path)), colors)
 
 
+def _e57_stores_single(e57, k: int) -> bool:
+    """Whether scan ``k`` stores its cartesian coordinates in single precision."""
+    from pye57 import libe57
+
+    try:
+        prototype = libe57.StructureNode(e57.get_header(k).points.prototype())
+        node = prototype.get("cartesianX")
+        if node.type() != libe57.NodeType.E57_FLOAT:
+            return False
+        return libe57.FloatNode(node).precision() == libe57.FloatPrecision.E57_SINGLE
+    except Exception:  # a scan without cartesian fields: nothing to judge
+        return False
+
+
 def _read_e57(path: Path) -> o3d.geometry.PointCloud:
     pye57 = _optional("pye57", ".e57")
     try:
@@ -201,6 +215,12 @@ def _read_e57(path: Path) -> o3d.geometry.PointCloud:
         raise ValueError(f"{path}: damaged or unreadable .e57 file ({_first_line(exc)})") from None
     if not scans:
         raise ValueError(f"{path}: no scans in this .e57 file")
+    for k, scan in enumerate(scans):
+        if _e57_stores_single(e57, k):  # judged in the scan's own frame, before its pose
+            header = e57.get_header(k)
+            xyz = np.column_stack([scan[f"cartesian{a}"] for a in "XYZ"]).astype(np.float64)
+            local = (xyz - np.asarray(header.translation)) @ np.asarray(header.rotation_matrix)
+            _warn_if_coarse(local.astype(np.float32), path, depth=2)
     parts, colors = [], []
     for scan in scans:
         xyz = np.column_stack([scan["cartesianX"], scan["cartesianY"], scan["cartesianZ"]]).astype(
@@ -216,6 +236,49 @@ def _read_e57(path: Path) -> o3d.geometry.PointCloud:
     return _cloud(points, rgb)
 
 
+def _warn_if_coarse(points32: np.ndarray, path: Path, depth: int = 0) -> None:
+    """A :class:`PrecisionWarning` when the float32 coordinates a file stores are too
+    coarse for the cloud's own size (said by the reader, where it is still known),
+    pointing at the caller of :func:`read_cloud` / :func:`write_cloud` (``depth``:
+    the frames between those and this call)."""
+    problem = coarse_float32(points32, str(path))
+    if problem is not None:
+        warnings.warn(problem, PrecisionWarning, stacklevel=3 + depth)
+
+
+def _stores_float32(path: Path, suffix: str) -> bool:
+    """Whether a PLY or PCD file stores its x coordinate as a 32-bit float (what
+    Open3D's reader widens to float64 without a word)."""
+    try:
+        with open(path, "rb") as fh:
+            header = []
+            for raw in fh:
+                line = raw.decode("ascii", "replace").split()
+                header.append(line)
+                if not line:
+                    continue
+                if line[0] in ("end_header", "DATA") or len(header) > 200:
+                    break
+    except OSError:
+        return False
+    if suffix == ".ply":
+        vertex = False
+        for line in header:
+            if line[:1] == ["element"]:
+                vertex = line[1:2] == ["vertex"]
+            elif vertex and len(line) == 3 and line[0] == "property" and line[2] == "x":
+                return line[1] in ("float", "float32")
+        return False
+    if suffix == ".pcd":
+        fields = next((ln[1:] for ln in header if ln[:1] == ["FIELDS"]), [])
+        sizes = next((ln[1:] for ln in header if ln[:1] == ["SIZE"]), [])
+        types = next((ln[1:] for ln in header if ln[:1] == ["TYPE"]), [])
+        if "x" in fields and len(sizes) == len(types) == len(fields):
+            k = fields.index("x")
+            return sizes[k] == "4" and types[k] == "F"
+    return False
+
+
 def _read_kitti(path: Path) -> o3d.geometry.PointCloud:
     """A KITTI Velodyne sweep: float32 records of x, y, z, reflectance."""
     size = path.stat().st_size
@@ -228,9 +291,7 @@ def _read_kitti(path: Path) -> o3d.geometry.PointCloud:
     points = as_points(records[:, :3].astype(np.float64), name=str(path))
     # The format's float32 is all the precision there is: say so here, where it is
     # still known, when it is too coarse for the sweep's own size.
-    problem = coarse_float32(records[:, :3], str(path))
-    if problem is not None:
-        warnings.warn(problem, PrecisionWarning, stacklevel=3)
+    _warn_if_coarse(records[:, :3], path, depth=2)
     return _cloud(points)
 
 
@@ -358,6 +419,8 @@ def _read_cloud(path: str | os.PathLike, mesh_points: int) -> o3d.geometry.Point
                 f"{declared} vertices read)"
             )
         as_points(cloud, name=str(path))  # finiteness check, naming the file
+        if _stores_float32(path, suffix):
+            _warn_if_coarse(np.asarray(cloud.points).astype(np.float32), path, depth=1)
         return cloud
     if suffix in (".las", ".laz"):
         return _read_las(path)
@@ -584,6 +647,8 @@ def write_cloud(
     elif suffix == ".e57":
         _write_e57(path, cloud)
     elif suffix in OPEN3D_FORMATS:
+        if suffix == ".pcd":  # Open3D writes PCD coordinates as float32
+            _warn_if_coarse(np.asarray(cloud.points).astype(np.float32), path)
         if not o3d.io.write_point_cloud(str(path), cloud):
             raise OSError(f"Open3D could not write {path}")
         if suffix == ".ply" and provenance is not None:

@@ -334,3 +334,42 @@ def test_reconstruct_writes_las_on_scan_0_s_grid(tmp_path):
     (vlr,) = [v for v in merged.header.vlrs if (v.user_id, v.record_id) == LAS_RECORD]
     assert json.loads(vlr.record_data)["command"] == "reconstruct"
     assert read_provenance(out)["config"]["register"]["seed"] == 0
+
+
+def test_every_reader_of_float32_files_says_when_they_are_too_coarse(tmp_path):
+    """A float32 PLY, a PCD (Open3D writes float32) and a single-precision E57 scan at
+    UTM coordinates warn when read (pointing at the caller), a PCD warns when written
+    there too; the same clouds in float64 (or our E57, stored about its centre) read
+    silently."""
+    import warnings
+
+    from o3d_rpointhop.io import PrecisionWarning, write_cloud
+
+    rng = np.random.default_rng(6)
+    far = rng.uniform(-5, 5, (400, 3)) + [512_345.0, 4_123_456.0, 87.0]
+    header = (
+        "ply\nformat binary_little_endian 1.0\nelement vertex 400\n"
+        "property float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    (tmp_path / "f32.ply").write_bytes(header.encode() + far.astype("<f4").tobytes())
+    with pytest.warns(PrecisionWarning, match="f32.ply holds float32") as caught:
+        read_cloud(tmp_path / "f32.ply")
+    assert caught[0].filename == __file__
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(far))
+    with pytest.warns(PrecisionWarning, match="c.pcd holds float32") as caught:
+        write_cloud(tmp_path / "c.pcd", cloud)
+    assert caught[0].filename == __file__
+    with pytest.warns(PrecisionWarning, match="c.pcd holds float32"):
+        read_cloud(tmp_path / "c.pcd")
+    pye57 = pytest.importorskip("pye57")
+    with pye57.E57(str(tmp_path / "raw.e57"), mode="w") as e57:
+        e57.write_scan_raw({f"cartesian{a}": far[:, k] for k, a in enumerate("XYZ")})
+    with pytest.warns(PrecisionWarning, match="raw.e57 holds float32") as caught:
+        read_cloud(tmp_path / "raw.e57")
+    assert caught[0].filename == __file__
+    write_cloud(tmp_path / "ours.e57", cloud)
+    write_cloud(tmp_path / "f64.ply", cloud)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_cloud(tmp_path / "ours.e57")
+        read_cloud(tmp_path / "f64.ply")
