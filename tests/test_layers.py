@@ -238,3 +238,16 @@ def test_the_check_finds_upward_imports_anywhere(module, source, expected):
 def test_the_check_finds_cycles():
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}}
     assert cycles(graph) == [["a", "b", "c", "a"]]
+
+
+def test_the_tests_mirror_the_package():
+    """Every subpackage has its tests in the same place under ``tests/`` (a contributor
+    finds a module's tests where the module is)."""
+    tests = PACKAGE.parent / "tests"
+    packages = [p.parent for p in PACKAGE.rglob("__init__.py") if p.parent != PACKAGE]
+    missing = [
+        str(p.relative_to(PACKAGE))
+        for p in packages
+        if not (tests / p.relative_to(PACKAGE)).is_dir()
+    ]
+    assert missing == [], f"subpackages without a tests folder: {missing}"

@@ -205,21 +205,6 @@ def load_model(name: str | None, n_components: int | None = None):
     return model
 
 
-def descriptor_of(args: argparse.Namespace, config: dict | None = None):
-    """The descriptor ``--descriptor`` and ``--model`` (and a config's ``[descriptor]``
-    and ``[fpfh]``) name; ``None`` leaves the choice to the library (its default
-    descriptor). See :func:`._config.descriptor_from`."""
-    from ._config import descriptor_from
-
-    descriptor, _ = descriptor_from(
-        config or {},
-        getattr(args, "descriptor", None),
-        getattr(args, "model", None),
-        getattr(args, "n_components", None),
-    )
-    return descriptor
-
-
 #: Where the commands' warnings go (stderr, unless -q; see ``cli.main``).
 log = logging.getLogger("o3d_rpointhop.cli")
 

@@ -97,17 +97,19 @@ def test_bad_settings_get_one_line(tmp_path, monkeypatch, capsys, pair, extra, m
 def test_model_object_runs_what_the_default_runs(capsys, pair):
     """``--model object`` is the default; ``--model modelnet40`` is the paper's model on
     the 128 axes registration matches."""
-    import argparse
-
-    from o3d_rpointhop.cli._common import descriptor_of
+    from o3d_rpointhop.cli._config import descriptor_from
 
     _, _, files = pair
     default = _run(capsys, files)
     named = _run(capsys, [*files, "--model", "object"])
     assert named["transformation"] == default["transformation"]
-    paper = descriptor_of(argparse.Namespace(descriptor="rpointhop", model="modelnet40"))
+    paper, section = descriptor_from({}, "rpointhop", "modelnet40")
     assert paper.n_features_out_ == 128 and len(paper.n_neighbors) == 4
-    assert descriptor_of(argparse.Namespace(descriptor="rpointhop", model=None)) is None
+    assert section["n_components"] == 128
+    assert descriptor_from({}, None, None) == (
+        None,
+        {**section, "model": None, "n_components": None},
+    )
 
 
 def test_outputs_record_their_run_and_config_from_repeats_it(tmp_path, capsys, pair):
