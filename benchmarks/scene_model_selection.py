@@ -56,7 +56,7 @@ CANDIDATES = {
     "1hop-64-azimuth": ({"n_neighbors": (64,), "pooling": "azimuth"}, "origin"),
     "1hop-64-lrf96": ({"n_neighbors": (64,), "lrf_neighbors": 96}, "origin"),
     "1hop-96 (shipped)": ({}, "origin"),
-    "1hop-96 (shipped), no viewpoints": ({}, None),
+    "1hop-96 (shipped) without viewpoints": ({}, None),
     "1hop-128": ({"n_neighbors": (128,)}, "origin"),
 }  # fmt: skip
 
