@@ -18,10 +18,10 @@ import json
 import time
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import FPFHTransformer, RPointHopTransformer
 from o3d_rpointhop.datasets import load_modelnet40
+from o3d_rpointhop.transforms import apply_transform, random_rigid_motion
 
 
 def nearest_descriptor(source_desc: np.ndarray, target_desc: np.ndarray) -> np.ndarray:
@@ -32,7 +32,7 @@ def nearest_descriptor(source_desc: np.ndarray, target_desc: np.ndarray) -> np.n
     return sq.argmin(axis=1)
 
 
-def make_pairs(points: np.ndarray, seed: int, noise: float = 0.0):
+def noisy_pairs(points: np.ndarray, seed: int, noise: float = 0.0):
     rng = np.random.default_rng(seed)
     pairs = []
     for shape in points:
@@ -41,9 +41,8 @@ def make_pairs(points: np.ndarray, seed: int, noise: float = 0.0):
         observed = truth
         if noise:
             observed = truth + np.clip(rng.normal(scale=noise, size=truth.shape), -0.05, 0.05)
-        rotation = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
-        shift = rng.uniform(-0.5, 0.5, 3)
-        pairs.append((observed @ rotation.T + shift, target, truth))
+        motion = random_rigid_motion(rng, 0.5)
+        pairs.append((apply_transform(observed, motion), target, truth))
     return pairs
 
 
@@ -88,7 +87,7 @@ def main() -> None:
     results = {"train_shapes": len(train), "test_shapes": len(test), "seed": args.seed}
     rows = []
     for protocol, noise in (("resampled", 0.0), ("resampled + noise 0.01", 0.01)):
-        pairs = make_pairs(test.points, args.seed, noise)
+        pairs = noisy_pairs(test.points, args.seed, noise)
         for name, model in models.items():
             if not hasattr(model, "kernels_"):
                 t = time.perf_counter()

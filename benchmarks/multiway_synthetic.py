@@ -17,19 +17,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import FPFHTransformer, register_multiway
 from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.evaluation._common import machine_facts
 from o3d_rpointhop.evaluation.protocols import crop_nearest
 from o3d_rpointhop.evaluation.provenance import multiway_provenance
 from o3d_rpointhop.evaluation.report import split_timings
-from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
+from o3d_rpointhop.transforms import apply_transform, random_rigid_motion, rotation_error_deg
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TOLERANCE = (2.0, 0.02)  # degrees, share of the unit-size object's radius
@@ -42,10 +41,7 @@ def make_scans(n_scans: int, seed: int = 0) -> tuple[list[np.ndarray], list[np.n
     for k in range(n_scans):
         whole = make_object(2400, shape_seed=21, sample_seed=1000 + k)
         view = whole[crop_nearest(whole, 0.7, rng)]
-        motion = np.eye(4)
-        if k:
-            motion[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
-            motion[:3, 3] = rng.uniform(-0.5, 0.5, 3)
+        motion = random_rigid_motion(rng, 0.5) if k else np.eye(4)
         scans.append(apply_transform(view, motion))
         poses.append(np.linalg.inv(motion))
     return scans, poses
@@ -65,7 +61,7 @@ def main(argv=None) -> int:
             "n_jobs": args.n_jobs,
             "seed": args.seed,
             "tolerance": TOLERANCE,
-            "machine": platform.processor() or platform.machine(),
+            "machine": machine_facts()["machine"],
         },
         "methods": {},
     }

@@ -21,25 +21,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from o3d_rpointhop.evaluation._common import machine_facts, peak_rss_mb
 from o3d_rpointhop.evaluation.registry import entries
 
 RESULTS = Path(__file__).resolve().parent / "results"
 METHODS = {name: e.description for name, e in entries("scaling").items()}
 FULL_MAX_POINTS = 200_000
-
-
-def peak_rss_mb() -> float:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024.0
-    raise RuntimeError("no VmHWM in /proc/self/status")
 
 
 def child(method: str, n: int, repeats: int, budget: str) -> None:
@@ -225,12 +217,9 @@ def main() -> None:
                 print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     folder = Path(args.output)
     folder.mkdir(parents=True, exist_ok=True)
-    import open3d
-
+    facts = machine_facts()
     result = {
-        "machine": f"{platform.machine()}, {len(__import__('os').sched_getaffinity(0))} cores",
-        "python": platform.python_version(),
-        "open3d": open3d.__version__,
+        **{k: facts[k] for k in ("machine", "python", "open3d")},
         "methods": METHODS,
         "rows": rows,
         "provenance": provenance(args.budgets),

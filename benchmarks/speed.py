@@ -15,30 +15,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import resource
 import subprocess
 import sys
 import time
 
 import numpy as np
-import open3d as o3d
 
 from o3d_rpointhop import FPFHTransformer, RPointHopTransformer
 from o3d_rpointhop.datasets import load_modelnet40, make_blob
-
-
-def peak_rss_mb() -> float:
-    """This process's peak resident memory (VmHWM; ru_maxrss on Linux keeps the peak of
-    the parent across fork/exec, so it cannot tell a child's own peak)."""
-    try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+from o3d_rpointhop.evaluation._common import machine_facts, peak_rss_mb
 
 
 def training_clouds(data):
@@ -93,14 +78,11 @@ def main() -> None:
         fit_memory_child(int(args._memory_child[0]), args._memory_child[1], args.data)
         return
 
+    facts = machine_facts()
     clouds, train_name = training_clouds(args.data)
     cloud, cloud_name = test_object(args.data)
     results = {
-        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, "
-        f"{len(__import__('os').sched_getaffinity(0))} cores",
-        "python": platform.python_version(),
-        "open3d": o3d.__version__,
-        "numpy": np.__version__,
+        **{k: facts[k] for k in ("machine", "python", "open3d", "numpy")},
     }
 
     fits = {}

@@ -172,9 +172,15 @@ def euler_angles_deg(transformation: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(np.asarray(transformation)[:3, :3]).as_euler("xyz", degrees=True)
 
 
-def random_rigid_motion(seed: int | None = None, max_translation: float = 1.0) -> np.ndarray:
+def random_rigid_motion(
+    seed: int | np.random.Generator | None = None, max_translation: float = 1.0
+) -> np.ndarray:
     """A random rigid motion: rotation uniform over SO(3), translation uniform in the cube
     ``[-max_translation, max_translation]^3``.
+
+    ``seed``: an int (or None) seeds a generator of its own; a ``numpy.random.Generator``
+    is drawn from (one integer that seeds the rotation, then the three translation
+    components), so that a sequence of motions comes from one generator.
 
     Returns
     -------
@@ -189,7 +195,7 @@ def random_rigid_motion(seed: int | None = None, max_translation: float = 1.0) -
     """
     from scipy.spatial.transform import Rotation
 
-    rng = np.random.default_rng(seed)
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     motion = np.eye(4)
     motion[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
     motion[:3, 3] = rng.uniform(-max_translation, max_translation, 3)

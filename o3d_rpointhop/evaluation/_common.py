@@ -54,6 +54,22 @@ def fixed_resolution(voxel: float) -> Callable[[object], float]:
     return lambda pair: voxel
 
 
+def peak_rss_mb() -> float:
+    """This process's peak resident memory in MiB (Linux's VmHWM: ``ru_maxrss`` keeps the
+    peak of the parent across fork/exec, so it cannot tell a child's own peak; elsewhere
+    ``ru_maxrss`` is all there is)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def machine_facts() -> dict:
     """The machine, the library versions and the thread budget (see
     :data:`~.methods.THREAD_BUDGETS`) a run was measured with."""

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import open3d as o3d
-from scipy.spatial.transform import Rotation
 
 from ..descriptors import FPFHTransformer
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
@@ -25,7 +24,7 @@ from ..registration.multiway import register_multiway
 from ..registration.pose_graph import optimise_pose_graph
 from ..registration.prepared import common_voxel
 from ..registration.result import MultiwayResult
-from ..transforms import apply_transform, rotation_error_deg
+from ..transforms import apply_transform, random_rigid_motion, rotation_error_deg
 from .methods import feature_ransac, fpfh_recipe_cloud
 from .provenance import multiway_provenance
 from .records import ScanRecord
@@ -142,10 +141,7 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
         rng = np.random.default_rng(seed)
         motions = [np.eye(4)]
         for _ in names[1:]:
-            motion = np.eye(4)
-            motion[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
-            motion[:3, 3] = rng.uniform(-0.2, 0.2, 3)
-            motions.append(motion)
+            motions.append(random_rigid_motion(rng, 0.2))
         moved = [apply_transform(scans[n].points, m) for n, m in zip(names, motions, strict=True)]
         reference = np.linalg.inv(scans[names[0]].pose)
         truth = [

@@ -13,6 +13,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from ..transforms import random_rigid_motion
+
 __all__ = ["Pair", "PROTOCOLS", "make_pairs", "crop_by_plane", "crop_nearest"]
 
 
@@ -90,10 +92,11 @@ def _rpmnet_pair(shape: np.ndarray, rng: np.random.Generator, so3: bool):
         views.append(shape[np.sort(rng.choice(kept, RPMNET_POINTS, replace=False))])
     truth_source, target = views
     if so3:
-        rotation = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+        motion = random_rigid_motion(rng, 0.5)
+        rotation, shift = motion[:3, :3], motion[:3, 3]
     else:
         rotation = _euler_rotation(rng, 45.0)
-    shift = rng.uniform(-0.5, 0.5, 3)
+        shift = rng.uniform(-0.5, 0.5, 3)
 
     def noisy(points):
         return points + np.clip(rng.normal(scale=0.01, size=points.shape), -0.05, 0.05)
@@ -149,10 +152,11 @@ def make_pairs(
         if protocol.startswith("paper"):
             rotation = _euler_rotation(rng, max_angle_deg)
             truth_source = target[rng.permutation(len(target))]
+            shift = rng.uniform(-0.5, 0.5, 3)
         else:
-            rotation = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+            motion = random_rigid_motion(rng, 0.5)
+            rotation, shift = motion[:3, :3], motion[:3, 3]
             truth_source = shape[1024:2048]
-        shift = rng.uniform(-0.5, 0.5, 3)
         observed = truth_source
         if protocol.endswith("noise"):
             noise = np.clip(rng.normal(scale=0.01, size=observed.shape), -0.05, 0.05)
