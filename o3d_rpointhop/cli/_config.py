@@ -171,46 +171,40 @@ def registration_options(
     every refinement are built from their sections; the settings from ``[settings]``.
     :func:`used_config` gives back the config these options are.
     """
-    from sklearn.base import clone
-
     from ..registration import RegistrationSettings
-    from ..registration.defaults import resolve_global_method
+    from ..registration.pipeline import build_chain
 
     register = {**REGISTER_KEYS, **config.get("register", {})}
     register.update({k: v for k, v in flags.items() if v is not None})
-    steps = _steps()
-    if register["global_method"] == "auto":
-        register["global_method"] = resolve_global_method("auto", descriptor)
-
-    def build(name):
-        if name in (None, "none"):
-            return None
-        if name not in steps:
-            return name  # register() names an unknown step in its error
-        step = steps[name](**config.get(name, {}))
-        try:  # every value checked now, before any cloud is read
+    refine = register["refine"]
+    names = [refine] if isinstance(refine, str) else list(refine)
+    names = [r for r in names if r not in (None, "none")]
+    if register["symmetry_check"]:
+        if not names:
+            raise UsageError("--symmetry-check needs an ICP refinement (--refine)")
+        names.append("symmetry_check")
+    global_method = register["global_method"]
+    try:
+        chain = build_chain(
+            None if global_method == "none" else global_method, names, descriptor, config
+        )
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"[register]: {exc}") from None
+    for _, step in chain:  # every value checked now, before any cloud is read
+        try:
             step._validate_params()
         except (ValueError, TypeError) as exc:
-            raise UsageError(f"[{name}]: {exc}") from None
-        return step
-
-    refine = register["refine"]
-    chain = [refine] if isinstance(refine, str) else list(refine)
-    chain = [build(r) for r in chain if r not in (None, "none")]
-    if register["symmetry_check"]:
-        if not chain:
-            raise UsageError("--symmetry-check needs an ICP refinement (--refine)")
-        from ..registration import SymmetryCheck
-
-        chain.append(SymmetryCheck(refine=clone(chain[-1]), **config.get("symmetry_check", {})))
+            raise UsageError(f"[{_section_of(step)[0]}]: {exc}") from None
+    first = chain[0][1] if chain[0][0] == "global" else None
+    rest = [step for name, step in chain if name != "global"]
     settings = config.get("settings")
     try:
         settings = RegistrationSettings(**settings) if settings else None
     except (ValueError, TypeError) as exc:
         raise UsageError(f"[settings]: {exc}") from None
     return {
-        "global_method": build(register["global_method"]),
-        "refine": chain or None,
+        "global_method": first,
+        "refine": rest or None,
         "voxel_size": register["voxel_size"],
         "n_global_points": register["n_global_points"],
         "seed": register["seed"],

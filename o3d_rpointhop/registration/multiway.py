@@ -36,7 +36,7 @@ from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method, resolve_global_points
-from .pipeline import GLOBAL_METHODS, RegistrationPipeline
+from .pipeline import GLOBAL_METHODS, RegistrationPipeline, build_chain
 from .pose_graph import optimise, poses_from_tree, spanning_tree
 from .prepared import PreparedCloud, common_voxel, estimate_normals, prepare_cloud
 from .result import MultiwayResult
@@ -67,13 +67,9 @@ def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any
     ending on the full scans."""
     if screen:
         coarse = PointToPlaneICP(settings.icp_distances[0], full_resolution=False)
-        step = (
-            GLOBAL_METHODS[global_method]()
-            if isinstance(global_method, str)
-            else clone(global_method)
-        )
-        return [("global", step), ("refine", coarse)]
-    return [("refine", PointToPlaneICP())]
+        step = global_method if isinstance(global_method, str) else clone(global_method)
+        return build_chain(step, [coarse])
+    return build_chain(None, [PointToPlaneICP()])
 
 
 def _pair_context(source, target, prepared_source, prepared_target, settings, seed):

@@ -43,7 +43,7 @@ from .steps import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RegistrationPipeline", "register", "GLOBAL_METHODS", "REFINE_METHODS"]
+__all__ = ["RegistrationPipeline", "build_chain", "register", "GLOBAL_METHODS", "REFINE_METHODS"]
 
 GLOBAL_METHODS = {
     "ransac": RANSACGlobal,
@@ -369,9 +369,14 @@ class RegistrationPipeline(_BaseComposition):
         )
 
 
-def _make_step(spec: str | RegistrationStep, table: dict) -> RegistrationStep:
-    """A step given by name (checked against ``table``) or as a step object."""
-    return spec if isinstance(spec, RegistrationStep) else table[spec]()
+def _make_step(spec: str | RegistrationStep, table: dict, params: dict) -> RegistrationStep:
+    """A step given by name (checked against ``table``, built with ``params[name]``) or
+    as a step object (used as given)."""
+    if isinstance(spec, RegistrationStep):
+        return spec
+    if spec not in table:
+        raise ValueError(f"unknown step {spec!r}; known: {sorted(table)}")
+    return table[spec](**params.get(spec, {}))
 
 
 def _check_refinements(refine: Any) -> list:
@@ -385,6 +390,67 @@ def _check_refinements(refine: Any) -> list:
                 f"RegistrationStep objects, got {item!r}"
             )
     return items
+
+
+def build_chain(
+    global_method: str | RegistrationStep | None = "auto",
+    refine: str | RegistrationStep | list | None = "point_to_plane",
+    descriptor: Any = None,
+    params: dict[str, dict] | None = None,
+) -> list[tuple[str, RegistrationStep]]:
+    """The named steps :func:`register` runs for these arguments, in order.
+
+    The one place a chain is built from names: ``register()``, the command line's
+    config files and multiway's pair registrations all come here.
+
+    Parameters
+    ----------
+    global_method : str, RegistrationStep or None, default="auto"
+        A name of :data:`GLOBAL_METHODS`, ``"auto"`` (the step the descriptor states,
+        :func:`~o3d_rpointhop.registration.defaults.resolve_global_method`), a step, or
+        None for no global step.
+    refine : str, RegistrationStep, list or None, default="point_to_plane"
+        Names of :data:`REFINE_METHODS` and steps, in order; ``"symmetry_check"`` by name
+        refines the twins with a copy of the refinement before it.
+    descriptor : transformer, default=None
+        What ``"auto"`` is resolved for.
+    params : dict, default=None
+        Parameters of the steps given by name, by name (a config file's sections).
+
+    Returns
+    -------
+    list of (str, RegistrationStep)
+        Named ``"global"``, ``"refine"``, ``"refine1"``..., ``"symmetry_check"``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or an empty chain.
+    """
+    params = params or {}
+    steps: list[tuple[str, RegistrationStep]] = []
+    stated = global_method == "auto"
+    global_method = resolve_global_method(global_method, descriptor)
+    if isinstance(global_method, str) and global_method not in GLOBAL_METHODS:
+        what = "the descriptor's registration_global_method_" if stated else "global_method"
+        raise ValueError(f"{what} {global_method!r} is not one of {sorted(GLOBAL_METHODS)}")
+    if global_method is not None:
+        steps.append(("global", _make_step(global_method, GLOBAL_METHODS, params)))
+    previous = None
+    for i, spec in enumerate(_check_refinements(refine)):
+        if isinstance(spec, SymmetryCheck):
+            steps.append(("symmetry_check", spec))
+            continue
+        if spec == "symmetry_check":  # twins are refined like the estimate was
+            refined = None if previous is None else clone(previous)
+            step = SymmetryCheck(refine=refined, **params.get("symmetry_check", {}))
+            steps.append(("symmetry_check", step))
+            continue
+        previous = _make_step(spec, REFINE_METHODS, params)
+        steps.append((f"refine{i}" if i else "refine", previous))
+    if not steps:
+        raise ValueError("nothing to do: global_method and refine are both None")
+    return steps
 
 
 @validate_params(
@@ -484,28 +550,7 @@ def register(
     >>> bool(abs(result.transformation[0, 3] + 0.1) < 1e-3)
     True
     """
-    steps: list[tuple[str, RegistrationStep]] = []
-    global_method = resolve_global_method(global_method, descriptor)
-    if isinstance(global_method, str) and global_method not in GLOBAL_METHODS:
-        raise ValueError(
-            f"the descriptor's registration_global_method_ {global_method!r} is not one "
-            f"of {sorted(GLOBAL_METHODS)}"
-        )
-    if global_method is not None:
-        steps.append(("global", _make_step(global_method, GLOBAL_METHODS)))
-    previous = None
-    for i, spec in enumerate(_check_refinements(refine)):
-        if isinstance(spec, SymmetryCheck):
-            steps.append(("symmetry_check", spec))
-            continue
-        if spec == "symmetry_check":  # twins are refined like the estimate was
-            step = SymmetryCheck(refine=None if previous is None else clone(previous))
-            steps.append(("symmetry_check", step))
-            continue
-        previous = _make_step(spec, REFINE_METHODS)
-        steps.append((f"refine{i}" if i else "refine", previous))
-    if not steps:
-        raise ValueError("nothing to do: global_method and refine are both None")
+    steps = build_chain(global_method, refine, descriptor)
     pipeline = RegistrationPipeline(
         steps,
         descriptor=descriptor,

@@ -143,3 +143,27 @@ def test_result_becomes_an_open3d_result(object_model, object_target):
         np.asarray(o3d_result.correspondence_set), result.correspondence_set
     )
     assert len(result.correspondence_set) > 0
+
+
+def test_build_chain_is_the_one_way_names_become_steps():
+    """Names, params by name, the twins' copy of the refinement before them, steps
+    given as objects used as given, and the errors."""
+    from o3d_rpointhop.registration import PointToPlaneICP, RANSACGlobal, SymmetryCheck
+    from o3d_rpointhop.registration.pipeline import build_chain
+
+    chain = build_chain(
+        "ransac",
+        ["point_to_point", "point_to_plane", "symmetry_check"],
+        params={"ransac": {"max_iteration": 500}, "point_to_plane": {"max_iteration": 7}},
+    )
+    assert [name for name, _ in chain] == ["global", "refine", "refine1", "symmetry_check"]
+    assert isinstance(chain[0][1], RANSACGlobal) and chain[0][1].max_iteration == 500
+    twin = chain[3][1]
+    assert isinstance(twin, SymmetryCheck) and twin.refine.max_iteration == 7
+    assert twin.refine is not chain[2][1]  # a copy
+    given = PointToPlaneICP()
+    assert build_chain(None, [given]) == [("refine", given)]
+    with pytest.raises(ValueError, match="nothing to do"):
+        build_chain(None, None)
+    with pytest.raises(ValueError, match="global_method 'magic'"):
+        build_chain("magic")
