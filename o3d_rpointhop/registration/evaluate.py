@@ -82,15 +82,6 @@ def evaluate(
         seconds=seconds,
         distance=distance,
     )
-    return RegistrationResult(
-        transformation=matrix,
-        fitness=quality.final.fitness,
-        inlier_rmse=quality.final.inlier_rmse,
-        correspondence_set=quality.final.correspondence_set,
-        steps=[step],
-        voxel_size=context.voxel_size,
-        seconds=seconds,
-        distance=distance,
-        converged=quality.converged,
-        ambiguous=quality.ambiguous,
+    return RegistrationResult.from_quality(
+        quality, matrix, [step], voxel_size=context.voxel_size, seconds=seconds, distance=distance
     )

@@ -355,17 +355,13 @@ class RegistrationPipeline(_BaseComposition):
             time.perf_counter() - start,
         )
         warn_flags(quality, distance, stacklevel)
-        return RegistrationResult(
-            transformation=context.to_world(current),
-            fitness=quality.final.fitness,
-            inlier_rmse=quality.final.inlier_rmse,
-            correspondence_set=quality.final.correspondence_set,
-            steps=results,
+        return RegistrationResult.from_quality(
+            quality,
+            context.to_world(current),
+            results,
             voxel_size=context.voxel_size,
             seconds=time.perf_counter() - start,
             distance=distance,
-            converged=quality.converged,
-            ambiguous=quality.ambiguous,
         )
 
 

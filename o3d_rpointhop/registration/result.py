@@ -244,6 +244,34 @@ class RegistrationResult:
         )
         return out
 
+    @classmethod
+    def from_quality(
+        cls,
+        quality: Any,
+        transformation: np.ndarray,
+        steps: list[StepResult],
+        *,
+        voxel_size: float,
+        seconds: float,
+        distance: float,
+    ) -> RegistrationResult:
+        """A result from the measurements behind its flags (``flags.Quality``): its
+        fitness, inlier RMSE and inlier pairs are ``quality.final``'s, its flags
+        ``quality``'s. What ``register()`` and :func:`~o3d_rpointhop.evaluate` both
+        return."""
+        return cls(
+            transformation=transformation,
+            fitness=quality.final.fitness,
+            inlier_rmse=quality.final.inlier_rmse,
+            correspondence_set=quality.final.correspondence_set,
+            steps=steps,
+            voxel_size=voxel_size,
+            seconds=seconds,
+            distance=distance,
+            converged=quality.converged,
+            ambiguous=quality.ambiguous,
+        )
+
     def as_dict(self) -> dict:
         """JSON-ready summary (the CLI's ``--json`` output)."""
         return {
