@@ -29,10 +29,10 @@ import numpy as np
 from o3d_rpointhop import RPointHopTransformer
 from o3d_rpointhop.datasets import load_modelnet40
 from o3d_rpointhop.evaluation._common import Progress, evaluate_methods, fixed_resolution
-from o3d_rpointhop.evaluation.methods import thread_budget
 from o3d_rpointhop.evaluation.modelnet40 import MODELNET40_FPFH_VOXEL
 from o3d_rpointhop.evaluation.protocols import make_pairs
 from o3d_rpointhop.evaluation.provenance import model_identity, run_provenance
+from o3d_rpointhop.evaluation.runner import thread_budget
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -25,8 +25,8 @@ import json
 import time
 from pathlib import Path
 
-from o3d_rpointhop.evaluation.methods import thread_budget
 from o3d_rpointhop.evaluation.provenance import model_identity
+from o3d_rpointhop.evaluation.runner import thread_budget
 from o3d_rpointhop.evaluation.scene_models import (
     TRAINING_SCENES,
     fit_scene_model,

@@ -82,8 +82,9 @@ def add_parser(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..evaluation.methods import default_methods, thread_budget
+    from ..evaluation.methods import default_methods
     from ..evaluation.report import markdown, write_report
+    from ..evaluation.runner import thread_budget
     from ..registration.defaults import default_descriptor
 
     if args.dataset == "multiway":

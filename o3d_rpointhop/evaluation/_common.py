@@ -13,9 +13,9 @@ from ..descriptors import RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
 from ..registration.settings import resolve_voxel_size
-from .methods import run_method
 from .metrics import is_symmetry, modified_chamfer, pair_errors, summarize
 from .records import PairRecord
+from .runner import run_method
 
 __all__ = ["Progress", "evaluate_methods", "fixed_resolution", "register_resolution"]
 
@@ -78,7 +78,7 @@ def machine_facts() -> dict:
     import open3d
 
     from .._version import __version__
-    from .methods import current_thread_budget
+    from .runner import current_thread_budget
 
     return {
         "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores",

@@ -1,4 +1,6 @@
-"""The registration methods every benchmark table compares, measured in the same run.
+"""The registration methods every benchmark table compares, measured in the same run:
+the table (:data:`METHODS`) of recipes by name. The peers' code is in :mod:`.peers`,
+running one on a pair in :mod:`.runner`.
 
 R-PointHop methods go through :func:`~o3d_rpointhop.register`, with the global step
 they name. The ``fpfh-ransac*`` and ``fpfh-fgr`` methods are Open3D's own pipeline, step
@@ -14,127 +16,36 @@ installed the method is skipped with a line on stderr.
 from __future__ import annotations
 
 import sys
-import time
-import warnings
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import open3d as o3d
-from joblib import parallel_config
 
-from .._utils.threads import repeatable_open3d
 from ..descriptors import FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
-from ..registration import RegistrationWarning, register
+from ..registration import register
+from .peers import (
+    fpfh_fgr,
+    fpfh_ransac,
+    kiss_matcher_available,
+    kiss_matcher_estimate,
+    open3d_recipe_descriptor,
+    recipe_icp,
+    rpointhop_open3d_ransac,
+    sc2pcr_step,
+)
 
 __all__ = [
     "DATASETS",
     "METHODS",
     "Method",
-    "MethodRun",
     "default_methods",
     "check_methods",
-    "run_method",
+    "shipped_scene_model",
 ]
 
 reg = o3d.pipelines.registration
-
-
-def fpfh_recipe_cloud(points, voxel, viewpoint=None):
-    """A cloud as Open3D's global registration tutorial prepares it: voxel-downsampled,
-    normals at 2 voxels (turned towards ``viewpoint`` when given, with Open3D's
-    ``orient_normals_towards_camera_location``), FPFH at 5 voxels; returns the cloud and
-    its features."""
-    cloud = to_point_cloud(points).voxel_down_sample(voxel)
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-    if viewpoint is not None:
-        cloud.orient_normals_towards_camera_location(np.asarray(viewpoint, dtype=np.float64))
-    feature = reg.compute_fpfh_feature(
-        cloud, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
-    )
-    return cloud, feature
-
-
-def _fpfh_recipe_inputs(source, target, voxel, viewpoints=None):
-    views = (None, None) if viewpoints is None else viewpoints
-    return (
-        *fpfh_recipe_cloud(source, voxel, views[0]),
-        *fpfh_recipe_cloud(target, voxel, views[1]),
-    )
-
-
-def feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter: bool):
-    """Open3D's RANSAC on feature matches, as in its global registration tutorial (on one
-    thread: only so does a seed repeat it, see ``repeatable_open3d``)."""
-    distance = 1.5 * voxel
-    o3d.utility.random.seed(seed)
-    with repeatable_open3d():
-        result = _open3d_ransac(src, tgt, f_src, f_tgt, mutual_filter, distance)
-    return np.array(result.transformation)
-
-
-def _open3d_ransac(src, tgt, f_src, f_tgt, mutual_filter, distance):
-    return reg.registration_ransac_based_on_feature_matching(
-        src,
-        tgt,
-        f_src,
-        f_tgt,
-        mutual_filter,
-        distance,
-        reg.TransformationEstimationPointToPoint(False),
-        3,
-        [
-            reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
-            reg.CorrespondenceCheckerBasedOnDistance(distance),
-        ],
-        reg.RANSACConvergenceCriteria(100000, 0.999),
-    )
-
-
-def _fpfh_ransac(source, target, voxel, seed, viewpoints=None):
-    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel, viewpoints)
-    return feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=True)
-
-
-def open3d_recipe_descriptor():
-    """The descriptor of the Open3D-native recipe: the one-hop object model (24-D), what
-    docs/registration.md recommends for Open3D's RANSAC (chosen on training pairs by
-    benchmarks/open3d_tutorial.py); Open3D's k-d tree over features searches a few
-    dozen dimensions fast (the 1624-D descriptor made its RANSAC 40-230x slower)."""
-    return RPointHopTransformer.pretrained("object")
-
-
-def _rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints=None):
-    """docs/registration.md, "Inside Open3D's own pipeline", step for step."""
-    from ..open3d_interop import to_open3d_feature
-
-    views = (None, None) if viewpoints is None else viewpoints
-    src = to_point_cloud(source).voxel_down_sample(voxel)
-    tgt = to_point_cloud(target).voxel_down_sample(voxel)
-    f_src = to_open3d_feature(model.transform(src, viewpoints=views[0]))
-    f_tgt = to_open3d_feature(model.transform(tgt, viewpoints=views[1]))
-    # mutual_filter=False: RANSAC does the filtering, and Open3D prints no fallback warning.
-    return feature_ransac(src, tgt, f_src, f_tgt, voxel, seed, mutual_filter=False)
-
-
-def _fpfh_fgr(source, target, voxel, seed, viewpoints=None):
-    src, f_src, tgt, f_tgt = _fpfh_recipe_inputs(source, target, voxel, viewpoints)
-    o3d.utility.random.seed(seed)
-    option = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=0.5 * voxel)
-    with repeatable_open3d():
-        result = reg.registration_fgr_based_on_feature_matching(src, tgt, f_src, f_tgt, option)
-    return np.array(result.transformation)
-
-
-def _recipe_icp(source, target, voxel, init):
-    src, tgt = to_point_cloud(source), to_point_cloud(target)
-    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-    result = reg.registration_icp(
-        src, tgt, 0.4 * voxel, init, reg.TransformationEstimationPointToPlane()
-    )
-    return np.array(result.transformation)
 
 
 def shipped_scene_model():
@@ -193,13 +104,6 @@ class Method:
 CAMERA_UP = (0.0, -1.0, 0.0)
 
 
-def _sc2pcr(*args, **kwargs):
-    """The SC2-PCR peer step (:mod:`.sc2pcr`), imported when used."""
-    from .sc2pcr import SC2PCRGlobal
-
-    return SC2PCRGlobal(*args, **kwargs)
-
-
 def _claimed(result) -> tuple[np.ndarray, bool]:
     """A result of :func:`~o3d_rpointhop.register` and whether its flags say it can be
     trusted (converged, not ambiguous)."""
@@ -222,14 +126,14 @@ def _fpfh_recipe(voxel_of: Callable[[float], float] = lambda voxel: voxel, icp: 
 
     def run(source, target, descriptor, voxel, seed, viewpoints):
         voxel = voxel_of(voxel)
-        estimate = _fpfh_ransac(source, target, voxel, seed, viewpoints)
-        return (_recipe_icp(source, target, voxel, estimate) if icp else estimate), None
+        estimate = fpfh_ransac(source, target, voxel, seed, viewpoints)
+        return (recipe_icp(source, target, voxel, estimate) if icp else estimate), None
 
     return run
 
 
 def _run_fpfh_fgr(source, target, descriptor, voxel, seed, viewpoints):
-    return _fpfh_fgr(source, target, voxel, seed, viewpoints), None
+    return fpfh_fgr(source, target, voxel, seed, viewpoints), None
 
 
 def _fpfh_pipeline(**options):
@@ -249,37 +153,14 @@ def _fpfh_pipeline(**options):
     return run
 
 
-def kiss_matcher_available() -> bool:
-    """Whether the optional KISS-Matcher wheel is installed and imports."""
-    try:
-        import kiss_matcher  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _run_kiss_matcher(source, target, descriptor, voxel, seed, viewpoints):
-    """KISS-Matcher's own pipeline (voxelisation, Faster-PFH, matching, ROBIN pruning,
-    GNC-TLS) at the resolution the other methods use; no refinement after it. It takes
-    no viewpoints; it claims the result it calls valid."""
-    import kiss_matcher
-
-    config = kiss_matcher.KISSMatcherConfig(voxel_size=float(voxel))
-    matcher = kiss_matcher.KISSMatcher(config)
-    src = np.asarray(to_point_cloud(source).points, dtype=np.float32)
-    tgt = np.asarray(to_point_cloud(target).points, dtype=np.float32)
-    solution = matcher.estimate(src, tgt)
-    out = np.eye(4)
-    if solution.valid:
-        out[:3, :3] = np.asarray(solution.rotation)
-        out[:3, 3] = np.asarray(solution.translation).ravel()
-    return out, bool(solution.valid)
+def _kiss_matcher(source, target, descriptor, voxel, seed, viewpoints):
+    return kiss_matcher_estimate(source, target, voxel)
 
 
 def _run_rpointhop_open3d(source, target, descriptor, voxel, seed, viewpoints):
     model = open3d_recipe_descriptor()
-    estimate = _rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints)
-    return _recipe_icp(source, target, voxel, estimate), None
+    estimate = rpointhop_open3d_ransac(source, target, voxel, seed, model, viewpoints)
+    return recipe_icp(source, target, voxel, estimate), None
 
 
 def _run_icp(source, target, descriptor, voxel, seed, viewpoints):
@@ -433,7 +314,7 @@ METHODS = _methods(
     Method(
         "fpfh-sc2pcr-icp",
         "FPFH + SC2-PCR (from its paper, on the consensus's matches) + ICP",
-        _fpfh_pipeline(global_method=_sc2pcr),
+        _fpfh_pipeline(global_method=sc2pcr_step),
         datasets=_SCENES,
         default_on=_SCENES,
         model=None,
@@ -458,7 +339,7 @@ METHODS = _methods(
     Method(
         "kiss-matcher",
         "KISS-Matcher end to end (pip wheel)",
-        _run_kiss_matcher,
+        _kiss_matcher,
         default_on=_SCENES,
         model=None,
         descriptor="kiss-matcher",
@@ -498,122 +379,3 @@ def check_methods(methods, dataset: str) -> list[str]:
         )
         methods.remove("kiss-matcher")
     return methods
-
-
-#: The thread budgets a benchmark can give both sides: ``"one"`` thread each (this
-#: library's kernels and Open3D's code alike), or ``"all"``: every core each (this
-#: library's kernels, and Open3D's normals, features and ICP; Open3D's RANSAC and FGR
-#: stay on one thread, the only way a seed repeats them).
-THREAD_BUDGETS = ("one", "all")
-_BUDGET = ["one"]
-
-
-@contextmanager
-def thread_budget(name: str) -> Iterator[None]:
-    """Run the benchmarks inside on the thread budget ``name`` (see
-    :data:`THREAD_BUDGETS`)."""
-    if name not in THREAD_BUDGETS:
-        raise ValueError(f"thread budget must be one of {THREAD_BUDGETS}, got {name!r}")
-    previous = _BUDGET[0]
-    _BUDGET[0] = name
-    try:
-        yield
-    finally:
-        _BUDGET[0] = previous
-
-
-def current_thread_budget() -> str:
-    """The thread budget methods run on now."""
-    return _BUDGET[0]
-
-
-@contextmanager
-def _budgeted() -> Iterator[None]:
-    """This library's kernels (``joblib.parallel_config``) and Open3D on the budget."""
-    one = _BUDGET[0] == "one"
-    previous = o3d.utility.get_max_threads()
-    if one:
-        o3d.utility.set_max_threads(1)
-    try:
-        with parallel_config(n_jobs=1 if one else -1):
-            yield
-    finally:
-        o3d.utility.set_max_threads(previous)
-
-
-@dataclass(frozen=True)
-class MethodRun:
-    """What one method did on one pair.
-
-    Attributes
-    ----------
-    transformation : ndarray of shape (4, 4)
-        Source to target.
-    seconds : float
-        Wall time, model loading left out.
-    claimed : bool or None
-        Whether the method's own flags call the result trustworthy (``register()``:
-        converged and not ambiguous; KISS-Matcher: valid); None for a method without
-        such a flag. Precision is measured over the claimed results.
-    """
-
-    transformation: np.ndarray
-    seconds: float
-    claimed: bool | None
-
-
-def run_method(
-    name: str,
-    source: np.ndarray,
-    target: np.ndarray,
-    *,
-    descriptor,
-    voxel: float,
-    seed: int = 0,
-    viewpoints=None,
-) -> MethodRun:
-    """Run one method on one pair.
-
-    Parameters
-    ----------
-    descriptor : RPointHopTransformer
-        The model the R-PointHop methods use (``rpointhop-loso``: the pair's
-        leave-one-scene-out model; ``rpointhop-scene`` always uses the shipped scene
-        model).
-    voxel : float
-        Resolution of the FPFH recipe and of ICP alone (0.05 for unit-sphere objects, as
-        in the Open3D tutorial).
-    viewpoints : None or (array-like, array-like), default=None
-        The sensor positions of the source and the target, each in its own
-        coordinates: passed to every descriptor (R-PointHop's frames, FPFH's normals, in
-        this library and in Open3D's recipes); KISS-Matcher takes none.
-
-    Returns
-    -------
-    MethodRun
-    """
-    if name not in METHODS:
-        raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
-    if name == "kiss-matcher" and not kiss_matcher_available():
-        raise ValueError(
-            "kiss-matcher is not installed: pip install '.[peers]' in the project folder "
-            "(or kiss-matcher)"
-        )
-    method = METHODS[name]
-    # Reading a model file is not part of a method's time: read it now, once per process.
-    if method.model == "scene":
-        descriptor = shipped_scene_model()
-    if method.model == "recipe":
-        open3d_recipe_descriptor()
-    # Flagged results are scored like any other; the flags' warnings would only repeat.
-    # Open3D's recipe warns when its mutual filter leaves few matches; the result says
-    # it. Both sides run on the same thread budget (thread_budget).
-    with (
-        warnings.catch_warnings(),
-        o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error),
-        _budgeted(),
-    ):
-        warnings.simplefilter("ignore", RegistrationWarning)
-        start = time.perf_counter()
-        transformation, claimed = method.run(source, target, descriptor, voxel, seed, viewpoints)
-        return MethodRun(transformation, time.perf_counter() - start, claimed)

@@ -25,7 +25,7 @@ from ..registration.pose_graph import optimise_pose_graph
 from ..registration.prepared import common_voxel
 from ..registration.result import MultiwayResult
 from ..transforms import apply_transform, random_rigid_motion, rotation_error_deg
-from .methods import feature_ransac, fpfh_recipe_cloud
+from .peers import feature_ransac, fpfh_recipe_cloud
 from .provenance import multiway_provenance
 from .records import ScanRecord
 from .registry import entries

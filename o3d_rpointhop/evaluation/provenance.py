@@ -15,7 +15,8 @@ from pathlib import Path
 from .._utils.provenance import json_safe, library_facts
 from ..descriptors import FPFHTransformer, RPointHopTransformer, descriptor_identity
 from ._common import machine_facts
-from .methods import METHODS, open3d_recipe_descriptor, shipped_scene_model
+from .methods import METHODS, shipped_scene_model
+from .peers import open3d_recipe_descriptor
 
 __all__ = [
     "REQUIRED",

@@ -13,10 +13,11 @@ from ..registration.defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, r
 from ..transforms import rotation_error_deg, translation_error
 from ._common import Progress, machine_facts, model_facts
 from .diagnostics import pair_diagnostics
-from .methods import METHODS, check_methods, run_method, shipped_scene_model
+from .methods import METHODS, check_methods, shipped_scene_model
 from .metrics import mcnemar, rmse_3dmatch
 from .provenance import run_provenance
 from .records import ScenePairRecord, as_rows
+from .runner import run_method
 from .scene_models import leave_one_scene_out
 
 __all__ = ["official_pairs", "run_3dmatch", "summarize_3dmatch", "VIEWPOINTS"]

@@ -8,17 +8,13 @@ import pytest
 from o3d_rpointhop import (
     RPointHopTransformer,
 )
-from o3d_rpointhop.evaluation.methods import (
-    METHODS,
-    check_methods,
-    default_methods,
-    kiss_matcher_available,
-    run_method,
-)
+from o3d_rpointhop.evaluation.methods import METHODS, check_methods, default_methods
 from o3d_rpointhop.evaluation.metrics import (
     pair_errors,
 )
+from o3d_rpointhop.evaluation.peers import kiss_matcher_available
 from o3d_rpointhop.evaluation.protocols import make_pairs
+from o3d_rpointhop.evaluation.runner import run_method
 
 
 def test_scene_only_methods_are_refused_on_objects():

@@ -1,0 +1,144 @@
+"""Running one benchmark method on one pair, on a thread budget both sides share."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+from joblib import parallel_config
+
+from ..registration import RegistrationWarning
+from .methods import METHODS, shipped_scene_model
+from .peers import kiss_matcher_available, open3d_recipe_descriptor
+
+__all__ = [
+    "THREAD_BUDGETS",
+    "MethodRun",
+    "current_thread_budget",
+    "run_method",
+    "thread_budget",
+]
+
+
+#: The thread budgets a benchmark can give both sides: ``"one"`` thread each (this
+#: library's kernels and Open3D's code alike), or ``"all"``: every core each (this
+#: library's kernels, and Open3D's normals, features and ICP; Open3D's RANSAC and FGR
+#: stay on one thread, the only way a seed repeats them).
+THREAD_BUDGETS = ("one", "all")
+_BUDGET = ["one"]
+
+
+@contextmanager
+def thread_budget(name: str) -> Iterator[None]:
+    """Run the benchmarks inside on the thread budget ``name`` (see
+    :data:`THREAD_BUDGETS`)."""
+    if name not in THREAD_BUDGETS:
+        raise ValueError(f"thread budget must be one of {THREAD_BUDGETS}, got {name!r}")
+    previous = _BUDGET[0]
+    _BUDGET[0] = name
+    try:
+        yield
+    finally:
+        _BUDGET[0] = previous
+
+
+def current_thread_budget() -> str:
+    """The thread budget methods run on now."""
+    return _BUDGET[0]
+
+
+@contextmanager
+def _budgeted() -> Iterator[None]:
+    """This library's kernels (``joblib.parallel_config``) and Open3D on the budget."""
+    one = _BUDGET[0] == "one"
+    previous = o3d.utility.get_max_threads()
+    if one:
+        o3d.utility.set_max_threads(1)
+    try:
+        with parallel_config(n_jobs=1 if one else -1):
+            yield
+    finally:
+        o3d.utility.set_max_threads(previous)
+
+
+@dataclass(frozen=True)
+class MethodRun:
+    """What one method did on one pair.
+
+    Attributes
+    ----------
+    transformation : ndarray of shape (4, 4)
+        Source to target.
+    seconds : float
+        Wall time, model loading left out.
+    claimed : bool or None
+        Whether the method's own flags call the result trustworthy (``register()``:
+        converged and not ambiguous; KISS-Matcher: valid); None for a method without
+        such a flag. Precision is measured over the claimed results.
+    """
+
+    transformation: np.ndarray
+    seconds: float
+    claimed: bool | None
+
+
+def run_method(
+    name: str,
+    source: np.ndarray,
+    target: np.ndarray,
+    *,
+    descriptor,
+    voxel: float,
+    seed: int = 0,
+    viewpoints=None,
+) -> MethodRun:
+    """Run one method on one pair.
+
+    Parameters
+    ----------
+    descriptor : RPointHopTransformer
+        The model the R-PointHop methods use (``rpointhop-loso``: the pair's
+        leave-one-scene-out model; ``rpointhop-scene`` always uses the shipped scene
+        model).
+    voxel : float
+        Resolution of the FPFH recipe and of ICP alone (0.05 for unit-sphere objects, as
+        in the Open3D tutorial).
+    viewpoints : None or (array-like, array-like), default=None
+        The sensor positions of the source and the target, each in its own
+        coordinates: passed to every descriptor (R-PointHop's frames, FPFH's normals, in
+        this library and in Open3D's recipes); KISS-Matcher takes none.
+
+    Returns
+    -------
+    MethodRun
+    """
+    if name not in METHODS:
+        raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
+    if name == "kiss-matcher" and not kiss_matcher_available():
+        raise ValueError(
+            "kiss-matcher is not installed: pip install '.[peers]' in the project folder "
+            "(or kiss-matcher)"
+        )
+    method = METHODS[name]
+    # Reading a model file is not part of a method's time: read it now, once per process.
+    if method.model == "scene":
+        descriptor = shipped_scene_model()
+    if method.model == "recipe":
+        open3d_recipe_descriptor()
+    # Flagged results are scored like any other; the flags' warnings would only repeat.
+    # Open3D's recipe warns when its mutual filter leaves few matches; the result says
+    # it. Both sides run on the same thread budget (thread_budget).
+    with (
+        warnings.catch_warnings(),
+        o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error),
+        _budgeted(),
+    ):
+        warnings.simplefilter("ignore", RegistrationWarning)
+        start = time.perf_counter()
+        transformation, claimed = method.run(source, target, descriptor, voxel, seed, viewpoints)
+        return MethodRun(transformation, time.perf_counter() - start, claimed)
