@@ -20,7 +20,7 @@ from ..open3d_interop import to_point_cloud
 from ..transforms import from_centred
 from .checks import check_geometry
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
-from .prepared import PreparedCloud, estimate_normals
+from .prepared import PreparedCloud, describe_global, estimate_normals
 from .result import StepResult
 from .settings import RegistrationSettings, resolve_voxel_size
 
@@ -226,16 +226,11 @@ class RegistrationContext:
                     self.descriptor = default_descriptor()
                 descriptor = self.descriptor
             cloud = self.global_cloud(which)
-            # Distances a descriptor leaves to the registration (FPFH's "auto" radii)
-            # follow its resolution.
-            at = getattr(descriptor, "at_resolution", None)
-            bound = descriptor if at is None else at(self.voxel_size, self.settings)
+            view = None if self.viewpoints is None else self.viewpoints[which]
             try:
-                if self.viewpoints is None:
-                    described = bound.transform(cloud)
-                else:
-                    described = _transform_seen_from(bound, cloud, self.viewpoints[which])
-                self._features[key] = np.asarray(described)
+                self._features[key] = describe_global(
+                    descriptor, cloud, self.voxel_size, self.settings, view
+                )
             except ValueError as exc:
                 detail = (
                     f" (after voxel downsampling at {self.voxel_size:.6g})"
@@ -296,19 +291,6 @@ def _up_vectors(up: Any) -> tuple[np.ndarray, np.ndarray] | None:
             f"up must be a non-zero vector (3,) or two of them (2, 3), got {arr.tolist()}"
         )
     return arr[0] / norms[0], arr[1] / norms[1]
-
-
-def _transform_seen_from(descriptor: Any, cloud, viewpoint: np.ndarray) -> Any:
-    """``descriptor.transform(cloud, viewpoints=viewpoint)``, refused with a clear error
-    by a descriptor that takes no viewpoints."""
-    import inspect
-
-    if "viewpoints" not in inspect.signature(descriptor.transform).parameters:
-        raise TypeError(
-            f"viewpoints were given, but {type(descriptor).__name__}.transform takes none: "
-            "use a descriptor of this library, or leave viewpoints out"
-        )
-    return descriptor.transform(cloud, viewpoints=viewpoint)
 
 
 def global_points(points: Any, n_global_points: int = DEFAULT_GLOBAL_POINTS) -> np.ndarray:

@@ -301,7 +301,7 @@ def register_multiway(
     prepared = parallel_map(
         prepare_cloud,
         [
-            (p, voxel, worker, view, settings.normal_radius)
+            (p, voxel, worker, view, settings.normal_radius, settings)
             for p, view in zip(points, views, strict=True)
         ],
         n_jobs=n_jobs,

@@ -22,6 +22,7 @@ __all__ = [
     "NORMAL_NEIGHBOURS",
     "PreparedCloud",
     "common_voxel",
+    "describe_global",
     "estimate_normals",
     "prepare_cloud",
 ]
@@ -87,17 +88,48 @@ def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
     )
 
 
+def describe_global(
+    descriptor: Any, cloud: Any, voxel: float, settings: Any = None, viewpoint: Any = None
+) -> np.ndarray:
+    """A global cloud's descriptors as every registration computes them: with the
+    distances the descriptor leaves to the registration bound to its resolution
+    (``descriptor.at_resolution(voxel, settings)``: FPFH's ``"auto"`` radii), seen from
+    ``viewpoint`` (the sensor position, in the cloud's coordinates) when given. The one
+    route for a pair's context and for scans prepared once for many pairs.
+
+    Raises
+    ------
+    TypeError
+        If a viewpoint is given to a descriptor whose ``transform`` takes none.
+    """
+    import inspect
+
+    at = getattr(descriptor, "at_resolution", None)
+    bound = descriptor if at is None else at(voxel, settings)
+    if viewpoint is None:
+        return np.asarray(bound.transform(cloud))
+    if "viewpoints" not in inspect.signature(bound.transform).parameters:
+        raise TypeError(
+            f"viewpoints were given, but {type(bound).__name__}.transform takes none: "
+            "use a descriptor of this library, or leave viewpoints out"
+        )
+    return np.asarray(bound.transform(cloud, viewpoints=viewpoint))
+
+
 def prepare_cloud(
     points: np.ndarray,
     voxel: float,
     descriptor: Any = None,
     viewpoint: Any = None,
     normal_radius: float | None = None,
+    settings: Any = None,
 ) -> PreparedCloud:
-    """A scan voxel-downsampled at ``voxel``; with ``descriptor``, described (seen from
-    ``viewpoint``, the scan's sensor position in its own coordinates, when given); with
-    ``normal_radius``, with normals estimated within that radius
-    (:func:`estimate_normals`, as the registration context estimates them).
+    """A scan voxel-downsampled at ``voxel``; with ``descriptor``, described as a pair's
+    context describes its global clouds (:func:`describe_global`, with ``settings``,
+    the registration's settings at ``voxel``; seen from ``viewpoint``, the scan's sensor
+    position in its own coordinates, when given); with ``normal_radius``, with normals
+    estimated within that radius (:func:`estimate_normals`, as the registration context
+    estimates them).
 
     The grid is laid about the scan's own centroid, so that nothing is lost far from
     the origin; the points come back in the scan's coordinates.
@@ -112,8 +144,5 @@ def prepare_cloud(
     kept = np.asarray(down.points) + origin
     features = None
     if descriptor is not None:
-        if viewpoint is None:
-            features = np.asarray(descriptor.transform(kept))
-        else:
-            features = np.asarray(descriptor.transform(kept, viewpoints=viewpoint))
+        features = describe_global(descriptor, kept, voxel, settings, viewpoint)
     return PreparedCloud(kept, features, normals)

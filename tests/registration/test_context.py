@@ -72,3 +72,29 @@ def test_prepared_clouds_without_features_are_described_by_the_context(pretraine
     )
     # "auto": the prepared clouds' own spacing, about the voxel they were prepared at.
     assert 0.5 * 0.05 < context.voxel_size < 1.5 * 0.05
+
+
+def test_a_prepared_scan_is_described_as_a_pair_describes_it():
+    """prepare_cloud (scan sets) and the context (pairs) describe by one route: FPFH's
+    radii are the registration's multiples of the resolution in both, so a scan
+    prepared once carries the features a pair's context computes for the same cloud."""
+    from o3d_rpointhop import FPFHTransformer
+    from o3d_rpointhop.registration import RegistrationSettings
+    from o3d_rpointhop.registration.context import RegistrationContext
+    from o3d_rpointhop.registration.prepared import PreparedCloud, prepare_cloud
+
+    cloud = make_object(4000, shape_seed=2)
+    voxel = 0.08  # coarser than the samples' spacing: FPFH's own "auto" would differ
+    settings = RegistrationSettings().at(voxel)
+    prepared = prepare_cloud(cloud, voxel, FPFHTransformer(), settings=settings)
+    bare = PreparedCloud(prepared.points)
+    context = RegistrationContext(
+        cloud, cloud, voxel_size=voxel, prepared=(bare, bare), settings=RegistrationSettings()
+    )
+    # The context centres the clouds, which moves Open3D's normals by rounding and a
+    # few histogram counts with them: the same up to that (median difference 0).
+    paired = np.abs(prepared.features - context.features(FPFHTransformer(), "source"))
+    assert np.median(paired) == 0.0 and paired.mean() < 0.1
+    # FPFH's own "auto" radii (from the prepared cloud's spacing) describe otherwise.
+    own = np.abs(prepared.features - FPFHTransformer().transform(prepared.points))
+    assert np.median(own) > 1.0 and own.mean() > 1.0
