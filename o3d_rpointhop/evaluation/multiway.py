@@ -22,8 +22,8 @@ from ..descriptors import FPFHTransformer
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
 from ..registration.multiway import register_multiway
 from ..registration.pose_graph import optimise_pose_graph
-from ..registration.prepared import common_voxel
 from ..registration.result import MultiwayResult
+from ..registration.settings import common_voxel
 from ..transforms import apply_transform, random_rigid_motion, rotation_error_deg
 from .peers import feature_ransac, fpfh_recipe_cloud
 from .provenance import multiway_provenance

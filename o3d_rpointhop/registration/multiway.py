@@ -38,9 +38,9 @@ from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method, resolve_global_points
 from .pipeline import GLOBAL_METHODS, RegistrationPipeline, build_chain
 from .pose_graph import optimise, poses_from_tree, spanning_tree
-from .prepared import PreparedCloud, common_voxel, estimate_normals, prepare_cloud
+from .prepared import PreparedCloud, estimate_normals, prepare_cloud
 from .result import MultiwayResult
-from .settings import RegistrationSettings
+from .settings import RegistrationSettings, common_voxel
 from .steps import PointToPlaneICP
 
 __all__ = ["register_multiway"]

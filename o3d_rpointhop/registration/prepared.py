@@ -4,7 +4,8 @@ given resolution, and its descriptors.
 A single registration prepares its two clouds itself (:class:`RegistrationContext`
 downsamples and describes them). A caller that registers one scan to many (scan sets:
 :func:`~o3d_rpointhop.register_multiway`) prepares every scan once with
-:func:`prepare_cloud`, at one resolution for all of them (:func:`common_voxel`), and
+:func:`prepare_cloud`, at one resolution for all of them
+(:func:`~.settings.common_voxel`), and
 gives the context the prepared scans.
 """
 
@@ -16,12 +17,9 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
-from .._utils.geometry import point_spacing
-
 __all__ = [
     "NORMAL_NEIGHBOURS",
     "PreparedCloud",
-    "common_voxel",
     "describe_global",
     "estimate_normals",
     "prepare_cloud",
@@ -77,15 +75,6 @@ def estimate_normals(cloud: o3d.geometry.PointCloud, radius: float) -> None:
     same on any thread count)."""
     search = o3d.geometry.KDTreeSearchParamHybrid(radius=float(radius), max_nn=NORMAL_NEIGHBOURS)
     cloud.estimate_normals(search)
-
-
-def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
-    """One resolution for every scan: the largest that any scan needs, its own spacing
-    widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
-    voxel^2), so that no scan is finer than it can be described."""
-    return float(
-        max(point_spacing(c) * max(1.0, np.sqrt(len(c) / n_global_points)) for c in clouds)
-    )
 
 
 def describe_global(

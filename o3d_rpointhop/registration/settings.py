@@ -8,6 +8,9 @@ distances, the radius of the normals, ...) is a named multiple of it, held by
 the resolution. The multiples follow Open3D's global registration tutorial where it
 gives one (normals 2x, FPFH 5x, RANSAC 1.5x) and were measured on training data
 otherwise (docs/registration.md, "Settings").
+
+The two rules that choose a resolution live here too: :func:`resolve_voxel_size` for a
+pair, :func:`common_voxel` for a set of scans registered together.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from .._utils.geometry import point_spacing
 from .._utils.validation import is_positive_number
 from ..descriptors import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR
 
-__all__ = ["RegistrationSettings", "resolve_voxel_size"]
+__all__ = ["RegistrationSettings", "common_voxel", "resolve_voxel_size"]
 
 # Small clouds whose point spacings differ by more than this factor are downsampled.
 _DENSITY_RATIO = 0.5
@@ -241,3 +244,12 @@ def resolve_voxel_size(source, target, voxel_size: float | str, n_global_points:
             break
         voxel *= np.sqrt(kept / n_global_points)
     return float(voxel), True
+
+
+def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
+    """One resolution for every scan: the largest that any scan needs, its own spacing
+    widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
+    voxel^2), so that no scan is finer than it can be described."""
+    return float(
+        max(point_spacing(c) * max(1.0, np.sqrt(len(c) / n_global_points)) for c in clouds)
+    )

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.evaluation.multiway import open3d_multiway_recipe
-from o3d_rpointhop.registration.prepared import common_voxel
+from o3d_rpointhop.registration.settings import common_voxel
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg, translation_error
 
 
