@@ -105,7 +105,6 @@ def test_the_report_names_each_method_model(fitted):
 #: is regenerated (docs/benchmarks.md). No file may join this list.
 WITHOUT_PROVENANCE = frozenset(
     {
-        "3dmatch_heldout.json",
         "3dmatch_heldout_timing_sample.json",
         "3dmatch_heldout_timing_sample_all.json",
         "3dmatch_training_gate.json",
