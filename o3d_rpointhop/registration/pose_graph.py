@@ -15,22 +15,22 @@ reg = o3d.pipelines.registration
 
 
 def spanning_tree(edges: dict, n: int) -> list[tuple[int, int]]:
-    """Maximum spanning forest by fitness (Kruskal)."""
-    parent = list(range(n))
+    """Maximum spanning forest by fitness (scipy's minimum spanning tree), its edges
+    listed from the best fitting down. Equal fitnesses are ranked by the edges' order,
+    so the forest is the one Kruskal's algorithm takes in that order."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import minimum_spanning_tree
 
-    def root(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    tree = []
-    for (i, j), _edge in sorted(edges.items(), key=lambda e: -e[1][1]):
-        ri, rj = root(i), root(j)
-        if ri != rj:
-            parent[ri] = rj
-            tree.append((i, j))
-    return tree
+    ordered = sorted(edges.items(), key=lambda e: -e[1][1])
+    if not ordered:
+        return []
+    rows = [i for (i, _), _ in ordered]
+    cols = [j for (_, j), _ in ordered]
+    # Weights by rank (distinct, never zero): the best edge the most negative.
+    weights = np.arange(-len(ordered), 0, dtype=np.float64)
+    forest = minimum_spanning_tree(coo_matrix((weights, (rows, cols)), shape=(n, n)).tocsr())
+    kept = {(min(i, j), max(i, j)) for i, j in zip(*forest.nonzero(), strict=True)}
+    return [pair for pair, _ in ordered if (min(pair), max(pair)) in kept]
 
 
 def poses_from_tree(tree, edges, n: int) -> list:
