@@ -4,9 +4,11 @@ this library's resolution and flags."""
 from __future__ import annotations
 
 import time
+from numbers import Real
 from typing import Any
 
-from .._utils.validation import check_rigid_transformation, is_positive_number
+from .._utils.params import Interval, StrOptions, validate_params
+from .._utils.validation import check_rigid_transformation
 from .context import RegistrationContext
 from .flags import assess
 from .result import RegistrationResult, StepResult
@@ -15,6 +17,18 @@ from .settings import RegistrationSettings
 __all__ = ["evaluate"]
 
 
+@validate_params(
+    {
+        "source": "no_validation",
+        "target": "no_validation",
+        "transformation": "no_validation",  # checked as a rigid motion, below
+        "distance": [None, Interval(Real, 0, None, closed="neither")],
+        "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
+        "settings": [None, RegistrationSettings],
+        "assess_ambiguity": ["boolean"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def evaluate(
     source: Any,
     target: Any,
@@ -65,9 +79,12 @@ def evaluate(
     1.0
     """
     start = time.perf_counter()
+    if isinstance(distance, bool):  # a Real to the declaration above, not a distance
+        raise ValueError(
+            f"The 'distance' parameter of evaluate must be None or a float in the range "
+            f"(0.0, inf). Got {distance!r} instead."
+        )
     matrix = check_rigid_transformation(transformation, "transformation")
-    if distance is not None and not is_positive_number(distance):
-        raise ValueError(f"distance must be a positive number, got {distance!r}")
     context = RegistrationContext(source, target, voxel_size=voxel_size, settings=settings)
     distance = float(distance or context.settings.fitness_distance)
     local = context.to_local(matrix)

@@ -37,7 +37,7 @@ def test_a_bad_init_is_named_init(cloud):
 
 @pytest.mark.parametrize("distance", [0.0, -1.0, np.inf, True, "0.1"])
 def test_distance_must_be_a_positive_number(cloud, distance):
-    with pytest.raises(ValueError, match="distance must be a positive number"):
+    with pytest.raises(ValueError, match="The .distance. parameter of evaluate must be"):
         evaluate(cloud, cloud, np.eye(4), distance=distance)
 
 
