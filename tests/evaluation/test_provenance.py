@@ -107,7 +107,6 @@ WITHOUT_PROVENANCE = frozenset(
     {
         "3dmatch_heldout_timing_sample.json",
         "3dmatch_heldout_timing_sample_all.json",
-        "3dmatch_training_gate.json",
         "descriptor_quality.json",
         "speed.json",
         "startup.json",
