@@ -21,6 +21,8 @@ import numpy as np
 
 from o3d_rpointhop import FPFHTransformer, RPointHopTransformer
 from o3d_rpointhop.datasets import load_modelnet40
+from o3d_rpointhop.descriptors import descriptor_identity
+from o3d_rpointhop.evaluation.provenance import descriptor_provenance
 from o3d_rpointhop.transforms import apply_transform, random_rigid_motion
 
 
@@ -100,6 +102,9 @@ def main() -> None:
             {"protocol": protocol, "method": "FPFH (Open3D)", **evaluate(fpfh.transform, pairs)}
         )
     results["rows"] = rows
+    results["provenance"] = descriptor_provenance(
+        {**models, "FPFH (Open3D)": descriptor_identity(fpfh)}, threads="default"
+    )
 
     header = "| protocol | method | correct within 0.05 | within 0.1 | chance (0.05 / 0.1) |"
     print(header + " s per cloud |")

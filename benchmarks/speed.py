@@ -23,7 +23,9 @@ import numpy as np
 
 from o3d_rpointhop import FPFHTransformer, RPointHopTransformer
 from o3d_rpointhop.datasets import load_modelnet40, make_blob
+from o3d_rpointhop.descriptors import descriptor_identity
 from o3d_rpointhop.evaluation._common import machine_facts, peak_rss_mb
+from o3d_rpointhop.evaluation.provenance import descriptor_provenance
 
 
 def training_clouds(data):
@@ -131,6 +133,13 @@ def main() -> None:
             runs.append(json.loads(out.strip().splitlines()[-1]))
         results["fit_memory"] = runs
 
+    results["provenance"] = descriptor_provenance(
+        {
+            "rpointhop": model,
+            "fpfh": descriptor_identity(fpfh),
+        },
+        threads="one and two jobs for the fit; the transform on the default budget",
+    )
     print(json.dumps(results, indent=2))
     tr = results["transform"]
     print(

@@ -263,12 +263,19 @@ def _median_seconds(code: list[str], repeats: int = 5) -> float:
 
 
 def measure_startup() -> dict:
+    from o3d_rpointhop.evaluation.provenance import descriptor_provenance
+
     python = sys.executable
     script = Path(python).with_name("o3d-rpointhop")
     return {
         "help_seconds": _median_seconds([str(script), "--help"]),
         "import_seconds": _median_seconds([python, "-c", "import o3d_rpointhop"]),
         "import_open3d_seconds": _median_seconds([python, "-c", "import open3d"]),
+        # No descriptor runs: the record names the library and the command timed.
+        "provenance": descriptor_provenance(
+            {"startup": {"class": None, "timed": "o3d-rpointhop --help; import o3d_rpointhop"}},
+            threads="default",
+        ),
     }
 
 
