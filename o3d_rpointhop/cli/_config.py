@@ -241,12 +241,12 @@ def multiway_options(
 
 
 def _section_of(step: Any) -> tuple[str, dict[str, Any]]:
-    """A step's section name and its parameters as a config gives them."""
-    for name, cls in _steps().items():
-        if type(step) is cls:
-            params = step.get_params(deep=False)
-            return name, {k: v for k, v in params.items() if k not in _OBJECT_PARAMETERS}
-    raise TypeError(f"no config section for {type(step).__name__}")  # pragma: no cover
+    """A step's section (its ``name``) and its parameters as a config gives them."""
+    name = type(step).name
+    if _steps().get(name) is not type(step):
+        raise TypeError(f"no config section for {type(step).__name__}")  # pragma: no cover
+    params = step.get_params(deep=False)
+    return name, {k: v for k, v in params.items() if k not in _OBJECT_PARAMETERS}
 
 
 def used_config(

@@ -252,6 +252,8 @@ class SC2PCRGlobal(ConsensusGlobal):
         ``max_matches``, ``cap``, ``mutual_filter``, ``max_ratio``, ``n_jobs``).
     """
 
+    name = "sc2pcr"
+
     _parameter_constraints = {
         **ConsensusGlobal._parameter_constraints,
         "threshold": [_POSITIVE],
@@ -311,5 +313,5 @@ class SC2PCRGlobal(ConsensusGlobal):
             n_threads=max(1, effective_n_jobs(self.n_jobs)),
         )
         return self._measured(
-            context, "sc2pcr", found, self.inlier_threshold, corr, hypotheses=hypotheses
+            context, self.name, found, self.inlier_threshold, corr, hypotheses=hypotheses
         )

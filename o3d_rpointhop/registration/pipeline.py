@@ -45,18 +45,12 @@ log = logging.getLogger(__name__)
 
 __all__ = ["RegistrationPipeline", "build_chain", "register", "GLOBAL_METHODS", "REFINE_METHODS"]
 
-GLOBAL_METHODS = {
-    "ransac": RANSACGlobal,
-    "consensus": ConsensusGlobal,
-    "fgr": FGRGlobal,
-    "svd": SVDGlobal,
-}
+#: The global steps by name (each step's ``name``).
+GLOBAL_METHODS = {step.name: step for step in (RANSACGlobal, ConsensusGlobal, FGRGlobal, SVDGlobal)}
+#: The refinements by name (each step's ``name``).
 REFINE_METHODS = {
-    "point_to_point": PointToPointICP,
-    "point_to_plane": PointToPlaneICP,
-    "generalized": GeneralizedICP,
-    "multiscale": MultiScaleICP,
-    "symmetry_check": SymmetryCheck,
+    step.name: step
+    for step in (PointToPointICP, PointToPlaneICP, GeneralizedICP, MultiScaleICP, SymmetryCheck)
 }
 
 

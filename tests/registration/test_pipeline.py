@@ -167,3 +167,20 @@ def test_build_chain_is_the_one_way_names_become_steps():
         build_chain(None, None)
     with pytest.raises(ValueError, match="global_method 'magic'"):
         build_chain("magic")
+
+
+def test_every_step_has_one_name():
+    """A step's ``name`` is its key in the pipeline's tables and its section in a config
+    file; a global step run alone reports it."""
+    from o3d_rpointhop.cli._config import default_config
+    from o3d_rpointhop.datasets import make_object
+    from o3d_rpointhop.registration import RegistrationContext
+    from o3d_rpointhop.registration.pipeline import GLOBAL_METHODS, REFINE_METHODS
+
+    sections = default_config()
+    for name, step in {**GLOBAL_METHODS, **REFINE_METHODS}.items():
+        assert step.name == name and name in sections
+    cloud = make_object(800, shape_seed=3)
+    context = RegistrationContext(cloud + [0.1, 0.0, 0.0], cloud)
+    for name in ("ransac", "svd"):
+        assert GLOBAL_METHODS[name]().run(context).name == name

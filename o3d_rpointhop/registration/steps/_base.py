@@ -44,6 +44,10 @@ class RegistrationStep(BaseEstimator):
 
     #: ``"global"`` steps ignore the incoming transformation; ``"refine"`` steps start from it.
     kind = "refine"
+    #: The step's one name: its key in the pipeline's tables (``GLOBAL_METHODS``,
+    #: ``REFINE_METHODS``), its section in a config file, and its results' name when it
+    #: runs alone.
+    name = "step"
     _parameter_constraints: dict = {}
 
     def _validate_all(self) -> None:

@@ -98,6 +98,8 @@ class ConsensusGlobal(GlobalStep):
         depend on it.
     """
 
+    name = "consensus"
+
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
         "max_correspondence_distance": OPTIONAL_DISTANCE,
@@ -203,7 +205,7 @@ class ConsensusGlobal(GlobalStep):
         )
         return self._measured(
             context,
-            "consensus",
+            self.name,
             found.transformation,
             distance,
             corr,

@@ -42,6 +42,8 @@ class FGRGlobal(GlobalStep):
         Open3D's ``iteration_number``.
     """
 
+    name = "fgr"
+
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
         "max_correspondence_distance": OPTIONAL_DISTANCE,
@@ -94,7 +96,7 @@ class FGRGlobal(GlobalStep):
         # FGR reports no inliers of its own: measure them like every other step.
         return self._measured(
             context,
-            "fgr",
+            self.name,
             np.array(result.transformation),
             distance,
             corr,

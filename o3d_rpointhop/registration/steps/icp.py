@@ -345,6 +345,8 @@ class MultiScaleICP(RegistrationStep):
         Ignored by ``"point_to_point"`` (Open3D has no robust point-to-point solver).
     """
 
+    name = "multiscale"
+
     _parameter_constraints = {
         "scales": ["array-like"],
         "max_iteration": ["array-like"],

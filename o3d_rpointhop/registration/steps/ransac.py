@@ -58,6 +58,8 @@ class RANSACGlobal(GlobalStep):
         refitted on those matches, as correspondence-graph estimators score.
     """
 
+    name = "ransac"
+
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
         "max_correspondence_distance": OPTIONAL_DISTANCE,
@@ -112,7 +114,7 @@ class RANSACGlobal(GlobalStep):
         )
         return self._measured(
             context,
-            "ransac",
+            self.name,
             found.transformation,
             distance,
             corr,

@@ -38,6 +38,8 @@ class SVDGlobal(GlobalStep):
     mutual_filter : bool, default=False
     """
 
+    name = "svd"
+
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
         "top_k": COUNT,
@@ -71,7 +73,7 @@ class SVDGlobal(GlobalStep):
         distance = context.settings.evaluation_distance
         check = context.evaluate(estimate, distance, which="global")
         return StepResult(
-            name="svd",
+            name=self.name,
             transformation=estimate,
             fitness=check.fitness,
             inlier_rmse=check.inlier_rmse,

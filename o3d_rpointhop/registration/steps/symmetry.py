@@ -81,6 +81,8 @@ class SymmetryCheck(RegistrationStep):
         Relative improvement of the truncated cost a twin needs to replace the estimate.
     """
 
+    name = "symmetry_check"
+
     _parameter_constraints = {
         "refine": [None, HasMethods(["run"])],
         "max_correspondence_distance": OPTIONAL_DISTANCE,
@@ -130,7 +132,7 @@ class SymmetryCheck(RegistrationStep):
             if coarse is not context:  # the trial ran on the global clouds: finish on the full
                 current = refine._run_timed(context, current).transformation
         result = context.evaluate(current, threshold)
-        result.name = "symmetry_check"
+        result.name = self.name
         result.info = {
             "max_correspondence_distance": threshold,
             "costs": costs,
