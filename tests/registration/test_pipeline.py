@@ -183,4 +183,4 @@ def test_every_step_has_one_name():
     cloud = make_object(800, shape_seed=3)
     context = RegistrationContext(cloud + [0.1, 0.0, 0.0], cloud)
     for name in ("ransac", "svd"):
-        assert GLOBAL_METHODS[name]().run(context).name == name
+        assert GLOBAL_METHODS[name]().run(context, np.eye(4)).name == name
