@@ -145,7 +145,11 @@ def _toml_value(value: Any) -> str:
 
 def to_toml(config: dict[str, dict[str, Any]]) -> str:
     """``config`` as a TOML file; parameters whose default is ``None`` (derived from the
-    settings' resolution) are written commented out."""
+    settings' resolution) are written commented out.
+
+    Written here rather than with a TOML writer (tomllib only reads): the values are
+    flat (numbers, booleans, strings, arrays of them), and the unset keys, which TOML
+    cannot hold as values, are kept visible as comments, which writers do not emit."""
     lines = [
         "# o3d-rpointhop configuration: one section per step, keys are the library's",
         "# parameter names (docs/registration.md). Commented keys are unset (None): a",
