@@ -234,3 +234,20 @@ def test_mcnemar_takes_successes_as_0_and_1_too():
     as_ints, as_bools = mcnemar(a, b), mcnemar(a.astype(bool), b.astype(bool))
     assert as_ints == as_bools
     assert (as_ints["a_only"], as_ints["b_only"]) == (2, 1)
+
+
+def test_summarize_gives_rpmnet_s_means_and_chamfer_by_hand():
+    """With every record's Chamfer distance: the mean isotropic errors and the mean
+    Chamfer distance, by hand; without one, none of the three keys."""
+    from o3d_rpointhop.evaluation.metrics import summarize
+    from o3d_rpointhop.evaluation.records import PairRecord
+
+    def record(rot, trans, chamfer):
+        return PairRecord(rot, trans, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], chamfer=chamfer)
+
+    out = summarize([record(1.0, 0.01, 0.002), record(3.0, 0.03, 0.004)])
+    assert out["mean_rotation_error_deg"] == pytest.approx(2.0)
+    assert out["mean_translation_error"] == pytest.approx(0.02)
+    assert out["chamfer"] == pytest.approx(0.003)
+    plain = summarize([record(1.0, 0.01, None), record(3.0, 0.03, 0.004)])
+    assert not {"mean_rotation_error_deg", "mean_translation_error", "chamfer"} & set(plain)

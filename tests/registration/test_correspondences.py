@@ -94,3 +94,29 @@ def test_the_compiled_candidates_are_the_argmin_passes(dtype, monkeypatch):
     monkeypatch.setattr(module, "COMPILED_FROM", 0)
     np.testing.assert_array_equal(module._smallest(values.copy(), 4), passes)
     np.testing.assert_array_equal(passes[5], [0, 1, 2, 3])
+
+
+def test_counts_and_shares_at_their_boundaries():
+    """An int count from 1, a share in (0, 1] of n (at least ``minimum``); a bool, 0, a
+    share above 1 or a negative number refused, with the rule in the message."""
+    from o3d_rpointhop.registration.correspondences import count_of
+
+    assert count_of(1, 10) == 1 and count_of(7, 10) == 7
+    assert count_of(1.0, 10) == 10 and count_of(0.5, 10) == 5
+    assert count_of(0.01, 10) == 1  # rounds to 0: the minimum
+    assert count_of(0.01, 10, minimum=3) == 3
+    for bad in (0, 0.0, -1, 1.5, 2.0, True):
+        with pytest.raises(ValueError, match=r"an int >= 1 or a share in \(0, 1\]"):
+            count_of(bad, 10)
+
+
+def test_integer_descriptors_are_matched_as_their_float_values():
+    from o3d_rpointhop.registration.correspondences import _as_features, find_correspondences
+
+    rng = np.random.default_rng(4)
+    ints = rng.integers(0, 50, (60, 5))
+    assert _as_features(ints, "x").dtype == np.float64
+    assert _as_features(ints.astype(np.float32), "x").dtype == np.float32  # floats kept
+    got = find_correspondences(ints, ints[::-1])
+    want = find_correspondences(ints.astype(np.float64), ints[::-1].astype(np.float64))
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))

@@ -163,3 +163,27 @@ def test_the_skew_sign_by_counting_is_the_sign_of_mean_minus_median(k, seed, tol
     expected = (1.0 if skew > 0 else -1.0) if abs(skew) > tol else towards[1]
     if abs(abs(skew) - tol) > 1e-12:  # away from the tolerance's edge, where rounding decides
         assert _skew_sign(local, 1, k - 1, k, tol, towards, frame) == expected
+
+
+def test_frame_size_bounds_and_float32_inputs():
+    """k from 2 (the point and one neighbour) to m + 1 (every neighbour), refused outside
+    with the neighbour count in the message; float32 inputs give what their float64
+    values give (the kernel computes in float64)."""
+    from o3d_rpointhop.descriptors.pointhop._frames import local_reference_frames
+
+    rng = np.random.default_rng(2)
+    offsets = rng.normal(size=(3, 40, 5))
+    towards = rng.normal(size=(3, 40))
+    sensor = rng.normal(size=(3, 40))
+    for k in (2, 6):
+        local_reference_frames(offsets, k, towards)
+    for k in (1, 7):
+        with pytest.raises(ValueError, match=f"k={k} needs between 1 and 5 neighbours"):
+            local_reference_frames(offsets, k, towards)
+    o32, t32, s32 = (a.astype(np.float32) for a in (offsets, towards, sensor))
+    wide = local_reference_frames(o32.astype(np.float64), 6, t32.astype(np.float64),
+                                  sensor=s32.astype(np.float64))  # fmt: skip
+    narrow = local_reference_frames(o32, 6, t32, sensor=s32)
+    for a, b in zip(wide, narrow, strict=True):
+        assert b.dtype == np.float64
+        np.testing.assert_array_equal(a, b)
