@@ -105,11 +105,7 @@ def test_the_report_names_each_method_model(fitted):
 #: is regenerated (docs/benchmarks.md). No file may join this list.
 WITHOUT_PROVENANCE = frozenset(
     {
-        "3dmatch_heldout_timing_sample.json",
-        "3dmatch_heldout_timing_sample_all.json",
         "descriptor_quality.json",
-        "speed.json",
-        "startup.json",
     }
 )
 
