@@ -103,11 +103,7 @@ def test_the_report_names_each_method_model(fitted):
 #: Committed result files written before runs recorded their provenance, and the
 #: script outputs that do not record it yet; each is refused by read_results until it
 #: is regenerated (docs/benchmarks.md). No file may join this list.
-WITHOUT_PROVENANCE = frozenset(
-    {
-        "descriptor_quality.json",
-    }
-)
+WITHOUT_PROVENANCE: frozenset[str] = frozenset()
 
 
 def test_committed_results_name_what_produced_them():
