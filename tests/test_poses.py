@@ -162,7 +162,7 @@ def test_evaluate_scores_a_given_transformation_like_open3d():
     far = motion_matrix(np.eye(3), np.array([5.0, 0.0, 0.0])) @ truth
     bad = evaluate(source, target, far)
     assert bad.fitness == 0.0 and not bad.converged
-    with pytest.raises(ValueError, match="distance must be a positive number"):
+    with pytest.raises(ValueError, match="The .distance. parameter of evaluate must be"):
         evaluate(source, target, truth, distance=-1.0)
     with pytest.raises(ValueError, match="4x4"):
         evaluate(source, target, np.eye(3))
