@@ -18,6 +18,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import open3d as o3d
@@ -86,6 +87,12 @@ class Method:
         own, or nothing (ICP alone). Records name it (:mod:`.provenance`).
     open3d_only : bool
         Open3D calls from end to end (a recipe).
+    available : callable
+        ``available() -> bool``: whether what the method needs is installed (an
+        optional peer's wheel); :func:`check_methods` skips it, with a line saying why,
+        when not.
+    install : str or None
+        What to install when it is not available.
     """
 
     name: str
@@ -96,6 +103,18 @@ class Method:
     model: str | None = "given"
     open3d_only: bool = False
     descriptor: str = "rpointhop"
+    available: Callable[[], bool] = field(default=lambda: True, repr=False)
+    install: str | None = None
+
+    def preload(self, descriptor: Any) -> Any:
+        """The descriptor the method runs with, its model read now (reading a model file
+        is not part of a method's time): the shipped scene model for ``model="scene"``,
+        the recipe's model read once for ``"recipe"``, else ``descriptor``."""
+        if self.model == "scene":
+            return shipped_scene_model()
+        if self.model == "recipe":
+            open3d_recipe_descriptor()
+        return descriptor
 
 
 #: Up in a camera's frame (image rows grow downwards): the up-axis prior of the 3DMatch
@@ -343,6 +362,8 @@ METHODS = _methods(
         default_on=_SCENES,
         model=None,
         descriptor="kiss-matcher",
+        available=kiss_matcher_available,
+        install="pip install '.[peers]' in the project folder (or kiss-matcher)",
     ),
     Method(
         "icp",
@@ -371,11 +392,10 @@ def check_methods(methods, dataset: str) -> list[str]:
     if elsewhere:
         where = sorted({d for m in elsewhere for d in METHODS[m].datasets})
         raise ValueError(f"{elsewhere} do not apply to {dataset} (only to {', '.join(where)})")
-    if "kiss-matcher" in methods and not kiss_matcher_available():
+    for name in [m for m in methods if not METHODS[m].available()]:
         print(
-            "benchmark: kiss-matcher skipped: not installed "
-            "(pip install '.[peers]' in the project folder)",
+            f"benchmark: {name} skipped: not installed ({METHODS[name].install})",
             file=sys.stderr,
         )
-        methods.remove("kiss-matcher")
+        methods.remove(name)
     return methods

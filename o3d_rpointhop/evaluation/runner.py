@@ -13,8 +13,7 @@ import open3d as o3d
 from joblib import parallel_config
 
 from ..registration import RegistrationWarning
-from .methods import METHODS, shipped_scene_model
-from .peers import kiss_matcher_available, open3d_recipe_descriptor
+from .methods import METHODS
 
 __all__ = [
     "THREAD_BUDGETS",
@@ -119,17 +118,10 @@ def run_method(
     """
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; choose from {sorted(METHODS)}")
-    if name == "kiss-matcher" and not kiss_matcher_available():
-        raise ValueError(
-            "kiss-matcher is not installed: pip install '.[peers]' in the project folder "
-            "(or kiss-matcher)"
-        )
     method = METHODS[name]
-    # Reading a model file is not part of a method's time: read it now, once per process.
-    if method.model == "scene":
-        descriptor = shipped_scene_model()
-    if method.model == "recipe":
-        open3d_recipe_descriptor()
+    if not method.available():
+        raise ValueError(f"{name} is not installed: {method.install}")
+    descriptor = method.preload(descriptor)
     # Flagged results are scored like any other; the flags' warnings would only repeat.
     # Open3D's recipe warns when its mutual filter leaves few matches; the result says
     # it. Both sides run on the same thread budget (thread_budget).

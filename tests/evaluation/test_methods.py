@@ -89,3 +89,26 @@ def test_every_method_runs(shapes):
             assert pair_errors(estimate, pair.truth)["rotation_error_deg"] < 2.0, name
     with pytest.raises(ValueError, match="unknown method"):
         run_method("magic", pair.source, pair.target, descriptor=model, voxel=0.05)
+
+
+def test_a_method_whose_peer_is_missing_is_skipped_with_its_install_line(monkeypatch, capsys):
+    """Each method says whether it is available and what to install: a benchmark skips
+    it with that line, a direct run refuses it; a scene method reads its own model."""
+    import dataclasses
+
+    from o3d_rpointhop.evaluation import methods as registry
+
+    missing = dataclasses.replace(registry.METHODS["kiss-matcher"], available=lambda: False)
+    monkeypatch.setitem(registry.METHODS, "kiss-matcher", missing)
+    assert check_methods(["kiss-matcher", "fpfh-pipeline-consensus-icp"], "3dmatch") == [
+        "fpfh-pipeline-consensus-icp"
+    ]
+    assert "kiss-matcher skipped: not installed (pip install '.[peers]'" in capsys.readouterr().err
+    cloud = np.zeros((10, 3))
+    with pytest.raises(ValueError, match=r"kiss-matcher is not installed: pip install"):
+        run_method("kiss-matcher", cloud, cloud, descriptor=None, voxel=0.05)
+    from o3d_rpointhop.descriptors import content_hash
+
+    scene = registry.METHODS["rpointhop-scene"].preload(None)
+    assert content_hash(scene) == content_hash(RPointHopTransformer.pretrained("scene"))
+    assert registry.METHODS["icp"].preload("given") == "given"
