@@ -37,10 +37,12 @@ _PLY_SIZES = {
 _PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 
 
-def _check_ply(path: Path) -> int:
-    """The number of vertices a PLY file declares, after checking that its header is
-    well formed and that its body holds them (so that Open3D's reader, whose C parser
-    reports errors by printing, never meets a damaged file); ValueError otherwise.
+def _check_ply(path: Path) -> tuple[int, bool]:
+    """The number of vertices a PLY file declares, and whether it stores their ``x`` as
+    a 32-bit float (which Open3D's reader widens to float64 without a word), after
+    checking that its header is well formed and that its body holds them (so that
+    Open3D's reader, whose C parser reports errors by printing, never meets a damaged
+    file); ValueError otherwise.
 
     The body is checked up to the end of the vertex element: by size for binary files,
     by its number of values for ASCII ones. Elements after the vertices (faces, range
@@ -53,6 +55,7 @@ def _check_ply(path: Path) -> int:
             raise ValueError("not a PLY file: its first line is not 'ply'")
         header = len(first)
         fmt, elements = None, []  # elements: [name, count, [property type or None]]
+        x_float32 = False
         for raw in fh:
             header += len(raw)
             words = raw.decode("ascii", "replace").split()
@@ -67,6 +70,8 @@ def _check_ply(path: Path) -> int:
                     elements.append([words[1], int(words[2]), []])
                 elif words[0] == "property":
                     elements[-1][2].append(None if words[1] == "list" else _PLY_SIZES[words[1]])
+                    if elements[-1][0] == "vertex" and words[2:] == ["x"]:
+                        x_float32 = words[1] in ("float", "float32")
                 else:
                     raise ValueError
             except (ValueError, IndexError, KeyError):
@@ -81,7 +86,7 @@ def _check_ply(path: Path) -> int:
         upto = elements[: names.index("vertex") + 1]
         n_vertices = upto[-1][1]
         if any(None in properties for _, _, properties in upto):
-            return n_vertices  # list properties: sizes known only while reading
+            return n_vertices, x_float32  # list properties: sizes known only while reading
         if fmt == "ascii":
             needed = sum(count * len(properties) for _, count, properties in upto)
             found = len(fh.read().split())
@@ -92,7 +97,7 @@ def _check_ply(path: Path) -> int:
             what = "bytes"
     if found < needed:
         raise ValueError(f"it ends early: {found} {what} where its vertices need {needed}")
-    return n_vertices
+    return n_vertices, x_float32
 
 
 _QUIET = {"lock": threading.Lock(), "users": 0, "level": None}
@@ -189,12 +194,13 @@ def _read_las(path: Path) -> o3d.geometry.PointCloud:
     return _cloud(as_points(points, name=str(path)), colors)
 
 
-def _e57_stores_single(e57, k: int) -> bool:
-    """Whether scan ``k`` stores its cartesian coordinates in single precision."""
+def _e57_stores_single(header) -> bool:
+    """Whether the scan of ``header`` stores its cartesian coordinates in single
+    precision."""
     from pye57 import libe57
 
     try:
-        prototype = libe57.StructureNode(e57.get_header(k).points.prototype())
+        prototype = libe57.StructureNode(header.points.prototype())
         node = prototype.get("cartesianX")
         if node.type() != libe57.NodeType.E57_FLOAT:
             return False
@@ -216,8 +222,8 @@ def _read_e57(path: Path) -> o3d.geometry.PointCloud:
     if not scans:
         raise ValueError(f"{path}: no scans in this .e57 file")
     for k, scan in enumerate(scans):
-        if _e57_stores_single(e57, k):  # judged in the scan's own frame, before its pose
-            header = e57.get_header(k)
+        header = e57.get_header(k)
+        if _e57_stores_single(header):  # judged in the scan's own frame, before its pose
             xyz = np.column_stack([scan[f"cartesian{a}"] for a in "XYZ"]).astype(np.float64)
             local = (xyz - np.asarray(header.translation)) @ np.asarray(header.rotation_matrix)
             _warn_if_coarse(local.astype(np.float32), path, depth=2)
@@ -246,36 +252,25 @@ def _warn_if_coarse(points32: np.ndarray, path: Path, depth: int = 0) -> None:
         warnings.warn(problem, PrecisionWarning, stacklevel=3 + depth)
 
 
-def _stores_float32(path: Path, suffix: str) -> bool:
-    """Whether a PLY or PCD file stores its x coordinate as a 32-bit float (what
-    Open3D's reader widens to float64 without a word)."""
+def _pcd_stores_float32(path: Path) -> bool:
+    """Whether a PCD file stores its ``x`` as a 32-bit float (Open3D writes them so, and
+    its reader widens them to float64 without a word)."""
     try:
         with open(path, "rb") as fh:
             header = []
             for raw in fh:
                 line = raw.decode("ascii", "replace").split()
                 header.append(line)
-                if not line:
-                    continue
-                if line[0] in ("end_header", "DATA") or len(header) > 200:
+                if line[:1] == ["DATA"] or len(header) > 200:
                     break
     except OSError:
         return False
-    if suffix == ".ply":
-        vertex = False
-        for line in header:
-            if line[:1] == ["element"]:
-                vertex = line[1:2] == ["vertex"]
-            elif vertex and len(line) == 3 and line[0] == "property" and line[2] == "x":
-                return line[1] in ("float", "float32")
-        return False
-    if suffix == ".pcd":
-        fields = next((ln[1:] for ln in header if ln[:1] == ["FIELDS"]), [])
-        sizes = next((ln[1:] for ln in header if ln[:1] == ["SIZE"]), [])
-        types = next((ln[1:] for ln in header if ln[:1] == ["TYPE"]), [])
-        if "x" in fields and len(sizes) == len(types) == len(fields):
-            k = fields.index("x")
-            return sizes[k] == "4" and types[k] == "F"
+    fields = next((ln[1:] for ln in header if ln[:1] == ["FIELDS"]), [])
+    sizes = next((ln[1:] for ln in header if ln[:1] == ["SIZE"]), [])
+    types = next((ln[1:] for ln in header if ln[:1] == ["TYPE"]), [])
+    if "x" in fields and len(sizes) == len(types) == len(fields):
+        k = fields.index("x")
+        return sizes[k] == "4" and types[k] == "F"
     return False
 
 
@@ -401,10 +396,10 @@ def _read_cloud(path: str | os.PathLike, mesh_points: int) -> o3d.geometry.Point
         raise ValueError(f"{path}: the file is empty")
     suffix = path.suffix.lower()
     if suffix in OPEN3D_FORMATS:
-        declared = None
+        declared, stores_float32 = None, suffix == ".pcd" and _pcd_stores_float32(path)
         if suffix == ".ply":
             try:
-                declared = _check_ply(path)
+                declared, stores_float32 = _check_ply(path)
             except (ValueError, OSError) as exc:
                 raise ValueError(f"{path}: damaged or unreadable .ply file ({exc})") from None
         with _quiet_open3d():
@@ -419,7 +414,7 @@ def _read_cloud(path: str | os.PathLike, mesh_points: int) -> o3d.geometry.Point
                 f"{declared} vertices read)"
             )
         as_points(cloud, name=str(path))  # finiteness check, naming the file
-        if _stores_float32(path, suffix):
+        if stores_float32:
             _warn_if_coarse(np.asarray(cloud.points).astype(np.float32), path, depth=1)
         return cloud
     if suffix in (".las", ".laz"):
