@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["commit", "json_safe", "library_facts"]
+__all__ = ["commit", "json_safe", "library_facts", "library_versions"]
 
 
 def json_safe(value: Any) -> Any:
@@ -53,16 +53,25 @@ def commit() -> dict:
     return {"id": head, "modified": bool(changed)}
 
 
-def library_facts() -> dict:
-    """The library's version and commit, and Open3D's, numpy's and Python's versions."""
+def library_versions() -> dict:
+    """The library's, Open3D's, numpy's and Python's versions."""
     import open3d
 
     from .._version import __version__
 
     return {
         "o3d_rpointhop": __version__,
-        "commit": commit(),
         "open3d": open3d.__version__,
         "numpy": np.__version__,
         "python": platform.python_version(),
+    }
+
+
+def library_facts() -> dict:
+    """The library's version and commit, and Open3D's, numpy's and Python's versions."""
+    versions = library_versions()
+    return {
+        "o3d_rpointhop": versions["o3d_rpointhop"],
+        "commit": commit(),
+        **{k: versions[k] for k in ("open3d", "numpy", "python")},
     }

@@ -6,8 +6,6 @@ import platform
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
 from .._utils.progress import progress_bar
 from ..descriptors import RPointHopTransformer
 from ..open3d_interop import to_point_cloud
@@ -72,20 +70,16 @@ def peak_rss_mb() -> float:
 
 def machine_facts() -> dict:
     """The machine, the library versions and the thread budget (see
-    :data:`~.methods.THREAD_BUDGETS`) a run was measured with."""
+    :data:`~.runner.THREAD_BUDGETS`) a run was measured with."""
     import os
 
-    import open3d
-
-    from .._version import __version__
+    from .._utils.provenance import library_versions
     from .runner import current_thread_budget
 
+    versions = library_versions()
     return {
         "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores",
-        "python": platform.python_version(),
-        "open3d": open3d.__version__,
-        "numpy": np.__version__,
-        "o3d_rpointhop": __version__,
+        **{k: versions[k] for k in ("python", "open3d", "numpy", "o3d_rpointhop")},
         "thread_budget": current_thread_budget(),
     }
 

@@ -84,6 +84,15 @@ def crop_by_plane(points: np.ndarray, fraction: float, rng: np.random.Generator)
     return np.flatnonzero(height > np.percentile(height, 100.0 * (1.0 - fraction)))
 
 
+def _moved(points: np.ndarray, rotation: np.ndarray, shift: np.ndarray):
+    """``points`` (in the target frame) moved by ``R x + t`` as a pair's source, and the
+    pair's truth, the motion that maps them back."""
+    truth = np.eye(4)
+    truth[:3, :3] = rotation.T
+    truth[:3, 3] = -rotation.T @ shift
+    return points @ rotation.T + shift, truth
+
+
 def _rpmnet_pair(shape: np.ndarray, rng: np.random.Generator, so3: bool):
     """``(source, target, truth, source_clean)`` of RPM-Net's partial protocol."""
     views = []
@@ -101,10 +110,7 @@ def _rpmnet_pair(shape: np.ndarray, rng: np.random.Generator, so3: bool):
     def noisy(points):
         return points + np.clip(rng.normal(scale=0.01, size=points.shape), -0.05, 0.05)
 
-    source = noisy(truth_source) @ rotation.T + shift
-    truth = np.eye(4)
-    truth[:3, :3] = rotation.T
-    truth[:3, 3] = -rotation.T @ shift
+    source, truth = _moved(noisy(truth_source), rotation, shift)
     return source, noisy(target), truth, truth_source
 
 
@@ -167,10 +173,6 @@ def make_pairs(
             keep_tgt = crop_nearest(target, fraction, rng)
             observed, truth_source = observed[keep_src], truth_source[keep_src]
             target = target[keep_tgt]
-        # source = R x + t (x in the target frame); truth maps it back.
-        source = observed @ rotation.T + shift
-        truth = np.eye(4)
-        truth[:3, :3] = rotation.T
-        truth[:3, 3] = -rotation.T @ shift
+        source, truth = _moved(observed, rotation, shift)
         pairs.append(Pair(source, target, truth, truth_source, name))
     return pairs
