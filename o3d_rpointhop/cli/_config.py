@@ -20,6 +20,7 @@ else:  # pragma: no cover - Python 3.10
 __all__ = [
     "default_config",
     "descriptor_from",
+    "estimator_section",
     "load_config",
     "multiway_options",
     "registration_options",
@@ -61,12 +62,14 @@ def _steps() -> dict[str, type]:
     return {**GLOBAL_METHODS, **REFINE_METHODS}
 
 
-def _settings_defaults() -> dict[str, Any]:
+def _settings_section(settings: Any = None) -> dict[str, Any]:
+    """``[settings]``: every factor of ``settings`` (``None``: the defaults), the
+    resolution left out (it is ``[register]``'s)."""
     from ..registration import RegistrationSettings
 
-    plain = RegistrationSettings()
+    settings = settings or RegistrationSettings()
     return {
-        f.name: getattr(plain, f.name)
+        f.name: getattr(settings, f.name)
         for f in dataclasses.fields(RegistrationSettings)
         if f.name != "voxel_size"
     }
@@ -82,11 +85,11 @@ def default_config() -> dict[str, dict[str, Any]]:
     for name, cls in _steps().items():
         params = cls().get_params(deep=False)
         config[name] = {k: v for k, v in params.items() if k not in _OBJECT_PARAMETERS}
-    config["settings"] = _settings_defaults()
+    config["settings"] = _settings_section()
     config["multiway"] = {"min_fitness": MIN_EDGE_FITNESS}
     config["descriptor"] = dict(DESCRIPTOR_KEYS)
-    config["fpfh"] = _estimator_defaults_of(FPFHTransformer())
-    config["fit"] = _estimator_defaults_of(RPointHopTransformer())
+    config["fpfh"] = estimator_section(FPFHTransformer())
+    config["fit"] = estimator_section(RPointHopTransformer())
     return config
 
 
@@ -230,14 +233,15 @@ def multiway_options(
     if options.pop("up") is not None:
         raise UsageError("reconstruct takes no up direction ([register] up)")
     refine = options.pop("refine") or []
-    if [type(step).__name__ for step in refine] != ["PointToPlaneICP"]:
+    if [step.name for step in refine] != ["point_to_plane"]:
         raise UsageError("reconstruct refines with point_to_plane ICP only ([register] refine)")
     if options["global_method"] is None:
         raise UsageError("reconstruct needs a global step ([register] global_method)")
-    multiway = config.get("multiway", {})
+    from ..registration.multiway import MIN_EDGE_FITNESS
+
     min_fitness = flags.get("min_fitness")
     if min_fitness is None:
-        min_fitness = multiway.get("min_fitness", default_config()["multiway"]["min_fitness"])
+        min_fitness = config.get("multiway", {}).get("min_fitness", MIN_EDGE_FITNESS)
     options["min_fitness"] = min_fitness
     if not (isinstance(min_fitness, (int, float)) and 0 < min_fitness <= 1):
         raise UsageError(f"min_fitness must be in (0, 1], got {options['min_fitness']!r}")
@@ -260,7 +264,7 @@ def used_config(
     :func:`multiway_options`) again: ``[register]`` with every step named, each step's
     section with every parameter, every setting, and ``[descriptor]`` (and ``[fpfh]``)
     as given. ``extra``: further sections (``[multiway]``)."""
-    from ..registration import RegistrationSettings, SymmetryCheck
+    from ..registration import SymmetryCheck
 
     config: dict[str, dict[str, Any]] = {}
     register: dict[str, Any] = {
@@ -292,12 +296,7 @@ def used_config(
             config[name] = params
         register["refine"] = names[0] if len(names) == 1 else (names or "none")
     config = {"register": register, **config}
-    settings = options.get("settings") or RegistrationSettings()
-    config["settings"] = {
-        f.name: getattr(settings, f.name)
-        for f in dataclasses.fields(RegistrationSettings)
-        if f.name != "voxel_size"
-    }
+    config["settings"] = _settings_section(options.get("settings"))
     config.update(extra or {})
     config["descriptor"] = {k: v for k, v in descriptor_section.items() if k != "fpfh"}
     if "fpfh" in descriptor_section:
@@ -345,7 +344,7 @@ def descriptor_from(
             descriptor._validate_params()
         except (ValueError, TypeError) as exc:
             raise UsageError(f"[fpfh]: {exc}") from None
-        return descriptor, {**section, "fpfh": _estimator_defaults_of(descriptor)}
+        return descriptor, {**section, "fpfh": estimator_section(descriptor)}
     name = section["model"]
     if not registering and name is None:
         name = section["model"] = "modelnet40"
@@ -372,7 +371,9 @@ def descriptor_from(
     return descriptor, section
 
 
-def _estimator_defaults_of(estimator: Any) -> dict[str, Any]:
+def estimator_section(estimator: Any) -> dict[str, Any]:
+    """An estimator's parameters as a config section holds them (no progress bar, no
+    thread count: those are not settings)."""
     params = estimator.get_params(deep=False)
     return {k: v for k, v in params.items() if k not in _NOT_SETTINGS and k != "n_jobs"}
 

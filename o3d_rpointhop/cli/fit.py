@@ -6,7 +6,7 @@ import argparse
 import time
 
 from ._common import EXIT_OK, UsageError, add_config, add_viewpoints
-from ._config import load_config, run_record, write_record
+from ._config import estimator_section, load_config, run_record, write_record
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -115,8 +115,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     model = estimator.fit(clouds, viewpoints=args.viewpoints)
     model.save(args.output)
-    used = {k: v for k, v in model.get_params().items() if k not in ("progress", "n_jobs")}
-    record = run_record("fit", {"fit": used}, model)
+    record = run_record("fit", {"fit": estimator_section(model)}, model)
     record["training_clouds"] = list(args.clouds)
     write_record(args.output, record)
     print(

@@ -35,8 +35,8 @@ from .._utils.validation import as_points, as_viewpoints
 from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
-from .defaults import default_descriptor, resolve_global_method, resolve_global_points
-from .pipeline import GLOBAL_METHODS, RegistrationPipeline, build_chain
+from .defaults import default_descriptor, resolve_global_points
+from .pipeline import RegistrationPipeline, build_chain
 from .pose_graph import optimise, poses_from_tree, spanning_tree
 from .prepared import PreparedCloud, estimate_normals, prepare_cloud
 from .result import MultiwayResult
@@ -110,7 +110,8 @@ def _register_pair(
     returns the transformation and the information matrix there (fitness None: a kept
     edge keeps the fitness that made it one, so neither it nor the flags are measured
     again). ``normals``: the full target scan's normals (:func:`_full_normals`);
-    ``global_method``: the screening's global step (a key of ``GLOBAL_METHODS``)."""
+    ``global_method``: the screening's global step (a key of ``GLOBAL_METHODS`` or a
+    step, copied)."""
     edge = settings.edge_distance
     if init is None:
         source, target = prepared_source.points, prepared_target.points
@@ -286,12 +287,8 @@ def register_multiway(
     points = [p - origin for p in points]
     views = [None if v is None else v - origin for v in views]
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
-    global_method = resolve_global_method(global_method, worker)
-    if isinstance(global_method, str) and global_method not in GLOBAL_METHODS:
-        raise ValueError(
-            f"global_method must be 'auto' or one of {sorted(GLOBAL_METHODS)} (or a global "
-            f"step), got {global_method!r}"
-        )
+    # The screening step, resolved and checked as register() does (copied per pair).
+    global_method = build_chain(global_method, None, worker)[0][1]
     if voxel_size == "auto":
         voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
     else:
@@ -316,7 +313,7 @@ def register_multiway(
         len(points),
         voxel,
         len(candidates),
-        global_method if isinstance(global_method, str) else type(global_method).__name__,
+        global_method.name,
     )
     results = parallel_map(
         _register_pair,
