@@ -33,6 +33,10 @@ def test_the_package_top_loads_lazily_and_exports_everything():
     from o3d_rpointhop.descriptors import PRETRAINED_MODELS
 
     assert SHIPPED_MODELS == tuple(PRETRAINED_MODELS)
+    from o3d_rpointhop.cli._common import POSE_FORMATS
+    from o3d_rpointhop.poses import POSE_FORMATS as LIBRARY_POSE_FORMATS
+
+    assert POSE_FORMATS == LIBRARY_POSE_FORMATS
 
 
 def test_help_builds_no_command_in_full():

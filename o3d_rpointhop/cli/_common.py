@@ -10,6 +10,8 @@ PROG = "o3d-rpointhop"
 #: The shipped models' names (``descriptors.PRETRAINED_MODELS``, written out so that
 #: building the parser loads no library; a test keeps the two equal).
 SHIPPED_MODELS = ("modelnet40", "object", "scene")
+#: The trajectory formats (``poses.POSE_FORMATS``, written out for the same reason).
+POSE_FORMATS = ("kitti", "tum", "3dmatch")
 
 #: Exit statuses (listed in ``--help``).
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_UNRELIABLE = 0, 1, 2, 3

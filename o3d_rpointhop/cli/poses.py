@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import EXIT_OK
+from ._common import EXIT_OK, POSE_FORMATS
 
 __all__ = ["add_parser", "run"]
-
-_FORMATS = ("kitti", "tum", "3dmatch")
 
 
 def add_parser(commands) -> None:
@@ -29,8 +27,8 @@ def add_parser(commands) -> None:
     )
     convert.add_argument("input")
     convert.add_argument("output")
-    convert.add_argument("--from", dest="source_format", choices=_FORMATS, required=True)
-    convert.add_argument("--to", dest="target_format", choices=_FORMATS, required=True)
+    convert.add_argument("--from", dest="source_format", choices=POSE_FORMATS, required=True)
+    convert.add_argument("--to", dest="target_format", choices=POSE_FORMATS, required=True)
     convert.add_argument(
         "--scans",
         type=int,

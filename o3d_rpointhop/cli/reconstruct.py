@@ -9,6 +9,7 @@ from pathlib import Path
 from ._common import (
     EXIT_OK,
     EXIT_UNRELIABLE,
+    POSE_FORMATS,
     CommandError,
     UsageError,
     add_config,
@@ -62,7 +63,7 @@ def add_parser(commands) -> None:
         "--trajectory-format",
         action="extend",
         nargs="+",
-        choices=["kitti", "tum", "3dmatch"],
+        choices=POSE_FORMATS,
         help="format of each --trajectory, in the same order (one format applies to "
         "all; default: kitti)",
     )
