@@ -25,6 +25,7 @@ import numpy as np
 from ..._utils.cells import CellGrid
 from ..._utils.compiled import kernel
 from ...transforms import from_centred, rigid_transform, rigid_transforms
+from ._edges import consistent_edges
 from ._refit import refit_while_growing
 
 __all__ = ["RansacResult", "ransac"]
@@ -53,42 +54,6 @@ class RansacResult:
     transformation: np.ndarray
     inliers: np.ndarray
     iterations: int
-
-
-@kernel()
-def _checked_draws(samples, source, target, edge_length):  # pragma: no cover - compiled
-    """Which drawn samples (rows of match indices) hold distinct matches whose edges
-    agree in length between source and target (Open3D's edge-length checker: each
-    length above ``edge_length`` times its partner; skipped when it is 0).
-
-    One pass per sample, without the gathered ``(b, n, 3)`` copies a numpy check needs.
-    Lengths are computed as ``numpy.linalg.norm`` rounds them, ``sqrt((x^2 + y^2) +
-    z^2)``, so the samples kept are exactly the ones the numpy expression keeps.
-    """
-    n, r = samples.shape
-    ok = np.ones(n, dtype=np.bool_)
-    for i in range(n):
-        good = True
-        for a in range(r):
-            for b in range(a + 1, r):
-                if samples[i, a] == samples[i, b]:
-                    good = False
-        if good and edge_length > 0.0:
-            for a in range(r):
-                for b in range(a + 1, r):
-                    p, q = samples[i, a], samples[i, b]
-                    dx = source[p, 0] - source[q, 0]
-                    dy = source[p, 1] - source[q, 1]
-                    dz = source[p, 2] - source[q, 2]
-                    ls = np.sqrt((dx * dx + dy * dy) + dz * dz)
-                    dx = target[p, 0] - target[q, 0]
-                    dy = target[p, 1] - target[q, 1]
-                    dz = target[p, 2] - target[q, 2]
-                    lt = np.sqrt((dx * dx + dy * dy) + dz * dz)
-                    if not (ls > edge_length * lt and lt > edge_length * ls):
-                        good = False
-        ok[i] = good
-    return ok
 
 
 @kernel()
@@ -252,7 +217,7 @@ def ransac(
         drawn += size
         batch = min(2 * batch, _MAX_BATCH)
         samples = rng.integers(0, m, size=(size, ransac_n))
-        samples = samples[_checked_draws(samples, source, target, float(edge_length))]
+        samples = samples[consistent_edges(samples, source, target, float(edge_length))]
         src, tgt = source[samples], target[samples]  # (b, ransac_n, 3)
         if not len(src):
             continue

@@ -13,6 +13,7 @@ from ..._utils.threads import repeatable_open3d
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
+from ._edges import consistent_edges
 from ._global import DESCRIPTOR, GlobalStep
 
 __all__ = ["FGRGlobal", "tuple_test"]
@@ -135,17 +136,8 @@ def tuple_test(
     rng = np.random.default_rng(seed)
     n_tuples = 100 * m if n_tuples is None else n_tuples
     triples = rng.integers(0, m, size=(n_tuples, 3))
-    triples = triples[
-        (triples[:, 0] != triples[:, 1])
-        & (triples[:, 1] != triples[:, 2])
-        & (triples[:, 0] != triples[:, 2])
-    ]
-    s = source[pairs[triples, 0]]  # (t, 3, 3)
-    t = target[pairs[triples, 1]]
-    ok = np.ones(len(triples), dtype=bool)
-    for a, b in ((0, 1), (1, 2), (2, 0)):
-        ls = np.linalg.norm(s[:, a] - s[:, b], axis=1)
-        lt = np.linalg.norm(t[:, a] - t[:, b], axis=1)
-        ok &= (ls > scale * lt) & (lt > scale * ls)
+    matched = np.ascontiguousarray(source[pairs[:, 0]], dtype=np.float64)
+    partners = np.ascontiguousarray(target[pairs[:, 1]], dtype=np.float64)
+    ok = consistent_edges(triples, matched, partners, float(scale))
     keep = np.unique(triples[ok])
     return pairs[keep] if keep.size >= 3 else pairs

@@ -128,7 +128,7 @@ def test_compiled_draw_check_keeps_exactly_what_the_numpy_check_keeps(ransac_n, 
     included: one differently rounded length would change the seeded result."""
     from scipy.spatial.transform import Rotation
 
-    from o3d_rpointhop.registration.steps._ransac import _checked_draws
+    from o3d_rpointhop.registration.steps._edges import consistent_edges
 
     rng = np.random.default_rng(ransac_n)
     source = rng.normal(size=(300, 3)) * [1.0, 5.0, 0.01]
@@ -139,7 +139,7 @@ def test_compiled_draw_check_keeps_exactly_what_the_numpy_check_keeps(ransac_n, 
         # where the last bit of a length decides.
         target[1::3] = source[1::3] / edge_length
     samples = rng.integers(0, 300, size=(200_000, ransac_n))
-    kept = _checked_draws(samples, source, target, edge_length)
+    kept = consistent_edges(samples, source, target, edge_length)
 
     expected = (np.diff(np.sort(samples, axis=1), axis=1) != 0).all(axis=1)
     src, tgt = source[samples], target[samples]
