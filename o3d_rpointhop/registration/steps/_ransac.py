@@ -121,22 +121,21 @@ def _verify(rot, shift, clouds, grid: CellGrid) -> int:
 
 def _refit_on_clouds(transformation, clouds, grid: CellGrid, rounds: int = 5):
     """Refit on the clouds' nearest-neighbour pairs within the grid's radius (as
-    Open3D's RANSAC finishes), while that gathers more pairs."""
-    source = clouds[0]
-    best = transformation
-    count = -1
-    for _ in range(rounds):
-        moved = source @ best[:3, :3].T + best[:3, 3]
-        dist, idx = grid.nearest(moved)
+    Open3D's RANSAC finishes), while that gathers more pairs; the last refit is kept
+    (Open3D's rule), even one that lost a pair."""
+    source, target = clouds
+    partners = {}  # each inlier mask (by identity) -> its points' nearest target points
+
+    def within(t):
+        dist, idx = grid.nearest(source @ t[:3, :3].T + t[:3, 3])
         inside = np.isfinite(dist)
-        if inside.sum() < 3 or inside.sum() <= count:
-            break
-        count = int(inside.sum())
-        try:
-            best = rigid_transform(source[inside], clouds[1][idx[inside]])
-        except ValueError:  # collinear pairs: keep the sample's fit
-            break
-    return best
+        partners[id(inside)] = idx
+        return inside
+
+    def fit(t, inside):
+        return rigid_transform(source[inside], target[partners[id(inside)][inside]])
+
+    return refit_while_growing(transformation, within, fit, rounds, keep_losing=True)[0]
 
 
 def _refit_on_matches(transformation, planes, sq_threshold, source, target, rounds: int = 5):

@@ -44,3 +44,32 @@ def test_refits_while_inliers_grow(counts, rounds, failing, ends_at):
     found, inliers = refit_while_growing(np.eye(4), within, fit, rounds)
     assert int(round(found[3, 3])) == ends_at
     assert inliers.sum() == counts[ends_at - 1]
+
+
+@pytest.mark.parametrize(
+    ("counts", "ends_at"), [([5, 7, 6, 12], 3), ([5, 4, 9], 2), ([5, 7, 9, 9], 4)]
+)
+def test_keep_losing_takes_a_losing_refit_and_stops(counts, ends_at):
+    """RANSAC's refit on the clouds keeps the last refit, even one that lost inliers,
+    and stops there."""
+    within, fit = _scripted(counts)
+    found, inliers = refit_while_growing(np.eye(4), within, fit, 10, keep_losing=True)
+    assert int(round(found[3, 3])) == ends_at
+    assert inliers.sum() == counts[ends_at - 1]
+
+
+def test_ransac_refit_on_clouds_keeps_open3d_rule():
+    """RANSAC's refit on the clouds, through the shared loop, takes the least-squares
+    refit on the sample's inliers even when it loses a pair at the threshold's edge."""
+    from o3d_rpointhop._utils.cells import CellGrid
+    from o3d_rpointhop.registration.steps._ransac import _refit_on_clouds
+
+    rng = np.random.default_rng(0)
+    target = rng.uniform(-1, 1, size=(400, 3))
+    source = target + rng.normal(scale=0.02, size=target.shape)
+    start = np.eye(4)
+    start[:3, 3] = [0.03, 0.0, 0.0]  # a sample's fit: slightly off
+    grid = CellGrid(target, 0.05)
+    found = _refit_on_clouds(start, (source, target), grid)
+    # Whatever the counts did, the result is a least-squares refit: much closer than the start.
+    assert np.abs(found[:3, 3]).max() < 0.01
