@@ -8,6 +8,7 @@ clouds; :meth:`RegistrationContext.to_world` maps their transformations back.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ from ..open3d_interop import to_point_cloud
 from ..transforms import from_centred
 from .checks import check_geometry
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
-from .prepared import PreparedCloud, describe_global, estimate_normals
+from .prepared import PreparedCloud, describe_global, estimate_normals, prepare_cloud
 from .result import StepResult
 from .settings import RegistrationSettings, resolve_voxel_size
 
@@ -30,6 +31,8 @@ reg = o3d.pipelines.registration
 
 #: The key of the context's own descriptor's features.
 _OWN = "own"
+#: The origin of clouds that are centred already.
+_ZERO = np.zeros(3)
 
 
 class RegistrationContext:
@@ -74,6 +77,9 @@ class RegistrationContext:
         each): the global steps that can (RANSAC, the consensus) then reject
         hypotheses that turn the source's up more than 90 degrees away from the
         target's (upside down). ``None``: no prior.
+    origin : array-like of shape (3,), default=None
+        Where the centred frame's origin is, in the caller's coordinates; ``None``: the
+        target's centroid. Zero for clouds that are centred already.
 
     Attributes
     ----------
@@ -110,10 +116,13 @@ class RegistrationContext:
         prepared: tuple[PreparedCloud, PreparedCloud] | None = None,
         viewpoints: Any = None,
         up: Any = None,
+        origin: Any = None,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
-        self.origin = np.asarray(self.target.get_center(), dtype=np.float64)
+        if origin is None:
+            origin = self.target.get_center()
+        self.origin = np.array(origin, dtype=np.float64)
         self.up = _up_vectors(up)
         self.viewpoints = None
         if viewpoints is not None:
@@ -122,8 +131,9 @@ class RegistrationContext:
                 which: view - self.origin
                 for which, view in zip(("source", "target"), views, strict=True)
             }
-        self.source.translate(-self.origin)
-        self.target.translate(-self.origin)
+        if self.origin.any():
+            self.source.translate(-self.origin)
+            self.target.translate(-self.origin)
         if check:
             check_geometry(np.asarray(self.source.points), "source", source)
             check_geometry(np.asarray(self.target.points), "target", target)
@@ -140,10 +150,7 @@ class RegistrationContext:
             for which, scan in zip(("source", "target"), prepared, strict=True):
                 if not isinstance(scan, PreparedCloud):
                     raise TypeError(f"prepared clouds must be PreparedCloud, got {type(scan)}")
-                cloud = to_point_cloud(scan.points, f"prepared {which}")
-                if scan.normals is not None:
-                    cloud.normals = o3d.utility.Vector3dVector(scan.normals)
-                self._global[which] = cloud.translate(-self.origin)
+                self._global[which] = _as_open3d(scan, f"prepared {which}").translate(-self.origin)
                 if scan.features is not None:
                     self._features[(_OWN, which)] = scan.features
             voxel, self.downsampled = voxel_size, True
@@ -171,13 +178,33 @@ class RegistrationContext:
         return self.source if which == "source" else self.target
 
     def global_cloud(self, which: str) -> o3d.geometry.PointCloud:
-        """The cloud the global step works on (downsampled when the clouds are large)."""
+        """The cloud the global step works on (downsampled when the clouds are large),
+        prepared on first use (:meth:`prepare` prepares both up front)."""
         if which not in self._global:
-            full = self.cloud(which)
-            self._global[which] = (
-                full.voxel_down_sample(self.voxel_size) if self.downsampled else full
+            prepared = prepare_cloud(
+                self.cloud(which), self.voxel_size, downsample=self.downsampled, centre=_ZERO
             )
+            self._global[which] = _as_open3d(prepared, f"prepared {which}")
         return self._global[which]
+
+    def prepare(self, descriptors: Any = ()) -> float:
+        """Prepare what the steps will share, before the first runs: both global clouds
+        (:func:`~o3d_rpointhop.registration.prepared.prepare_cloud`) and their
+        descriptors by each of ``descriptors`` (``None``: the context's own; see
+        :meth:`features`). Idempotent.
+
+        Returns
+        -------
+        float
+            The seconds it took (0 for what was prepared already).
+        """
+        start = time.perf_counter()
+        for which in ("source", "target"):
+            self.global_cloud(which)
+        for descriptor in descriptors:
+            for which in ("source", "target"):
+                self.features(descriptor, which)
+        return time.perf_counter() - start
 
     def clouds(
         self, which: str = "full"
@@ -203,13 +230,9 @@ class RegistrationContext:
                 descriptor=self.descriptor,
                 check=False,
                 settings=self.settings,
+                origin=_ZERO,  # this context's frame: transformations carry over
             )
             self._coarse.viewpoints, self._coarse.up = self.viewpoints, self.up
-            # The same frame as this context (its clouds are centred already, but their
-            # own centroid may differ slightly): transformations carry over unchanged.
-            self._coarse.source.translate(self._coarse.origin)
-            self._coarse.target.translate(self._coarse.origin)
-            self._coarse.origin = np.zeros(3)
         return self._coarse
 
     def features(self, descriptor: Any, which: str) -> np.ndarray:
@@ -273,6 +296,14 @@ class RegistrationContext:
             result = reg.evaluate_registration(source, target, distance, transformation)
         info = {"max_correspondence_distance": distance}
         return StepResult.from_open3d("evaluation", result, 0.0, info, distance)
+
+
+def _as_open3d(scan: PreparedCloud, what: str) -> o3d.geometry.PointCloud:
+    """A prepared cloud's points (and normals) as an Open3D cloud."""
+    cloud = to_point_cloud(scan.points, what)
+    if scan.normals is not None:
+        cloud.normals = o3d.utility.Vector3dVector(scan.normals)
+    return cloud
 
 
 def _up_vectors(up: Any) -> tuple[np.ndarray, np.ndarray] | None:

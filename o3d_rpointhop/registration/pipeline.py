@@ -180,9 +180,11 @@ class RegistrationPipeline(_BaseComposition):
         self._set_params("steps", **params)
         return self
 
-    def _check(self) -> list[tuple[str, RegistrationStep]]:
-        """Validate the pipeline and every step, once per public call."""
-        self._validate_params()
+    def _check(self, own: bool = True) -> list[tuple[str, RegistrationStep]]:
+        """Validate the pipeline (unless ``own`` is False: a caller that checked the same
+        parameters already) and every step, once per public call."""
+        if own:
+            self._validate_params()
         steps = _check_steps(self.steps)
         for name, step in steps:
             try:
@@ -313,8 +315,13 @@ class RegistrationPipeline(_BaseComposition):
         return self._run(steps, context, init, time.perf_counter(), assess_ambiguity, 3)
 
     def _run(self, steps, context, init, start, ambiguity, stacklevel) -> RegistrationResult:
-        """Every step in order on ``context``, then the result's flags."""
+        """Prepare the clouds, run every step in order on ``context``, then set the
+        result's flags."""
         current = np.eye(4) if init is None else context.to_local(check_rigid_transformation(init))
+        # First stage: the global clouds and their descriptors, for every global step.
+        described = [d for _, step in steps for d in step._descriptors()]
+        preparation = context.prepare(described) if described else 0.0
+        log.debug("prepared the clouds in %.3f s", preparation)
         results = []
         for name, step in steps:
             outcome = step._run_timed(context, current)
@@ -356,6 +363,7 @@ class RegistrationPipeline(_BaseComposition):
             voxel_size=context.voxel_size,
             seconds=time.perf_counter() - start,
             distance=distance,
+            preparation_seconds=preparation,
         )
 
 
@@ -551,5 +559,6 @@ def register(
         viewpoints=viewpoints,
         up=up,
     )
+    # validate_params checked the pipeline's parameters; the steps are checked here.
     # The warnings of a flagged result point at register()'s caller.
-    return pipeline._register(pipeline._check(), source, target, init, stacklevel=5)
+    return pipeline._register(pipeline._check(own=False), source, target, init, stacklevel=5)

@@ -1,12 +1,12 @@
 """Clouds prepared once for many registrations: the global step's cloud of a scan at a
 given resolution, and its descriptors.
 
-A single registration prepares its two clouds itself (:class:`RegistrationContext`
-downsamples and describes them). A caller that registers one scan to many (scan sets:
-:func:`~o3d_rpointhop.register_multiway`) prepares every scan once with
-:func:`prepare_cloud`, at one resolution for all of them
-(:func:`~.settings.common_voxel`), and
-gives the context the prepared scans.
+:func:`prepare_cloud` is the one way a cloud becomes a prepared cloud. A single
+registration prepares its two clouds as the first stage of its pipeline
+(:meth:`RegistrationContext.prepare`); a caller that registers one scan to many (scan
+sets: :func:`~o3d_rpointhop.register_multiway`) prepares every scan once, at one
+resolution for all of them (:func:`~.settings.common_voxel`), and gives the context
+the prepared scans.
 """
 
 from __future__ import annotations
@@ -106,31 +106,64 @@ def describe_global(
 
 
 def prepare_cloud(
-    points: np.ndarray,
+    points: Any,
     voxel: float,
     descriptor: Any = None,
     viewpoint: Any = None,
     normal_radius: float | None = None,
     settings: Any = None,
+    *,
+    downsample: bool = True,
+    centre: Any = None,
 ) -> PreparedCloud:
-    """A scan voxel-downsampled at ``voxel``; with ``descriptor``, described as a pair's
-    context describes its global clouds (:func:`describe_global`, with ``settings``,
-    the registration's settings at ``voxel``; seen from ``viewpoint``, the scan's sensor
-    position in its own coordinates, when given); with ``normal_radius``, with normals
-    estimated within that radius (:func:`estimate_normals`, as the registration context
-    estimates them).
+    """A scan as the global step sees it at resolution ``voxel``: voxel-downsampled
+    (unless ``downsample`` is False); with ``descriptor``, described as every
+    registration describes its global clouds (:func:`describe_global`, with
+    ``settings``, the registration's settings at ``voxel``; seen from ``viewpoint``, the
+    scan's sensor position in its own coordinates, when given); with
+    ``normal_radius``, with normals estimated within that radius
+    (:func:`estimate_normals`); without it, an Open3D cloud's own normals are kept
+    (averaged per voxel).
 
-    The grid is laid about the scan's own centroid, so that nothing is lost far from
-    the origin; the points come back in the scan's coordinates.
+    The one way a cloud becomes a prepared cloud: a pair's
+    :class:`~o3d_rpointhop.registration.context.RegistrationContext` prepares its two
+    clouds here, :func:`~o3d_rpointhop.register_multiway` every scan once.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3) or open3d.geometry.PointCloud
+        Not modified.
+    voxel : float
+        The resolution: the voxel size, and the resolution the descriptor is bound to.
+    descriptor, viewpoint, normal_radius, settings
+        See above.
+    downsample : bool, default=True
+        False keeps the points as they are (a cloud already at the resolution).
+    centre : array-like of shape (3,), default=None
+        Where the grid's coordinates are measured from while downsampling, so that
+        nothing is lost far from the origin; ``None``: the scan's own centroid. The
+        points come back in the scan's coordinates either way.
+
+    Returns
+    -------
+    PreparedCloud
     """
-    origin = points.mean(axis=0)
-    down = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points - origin))
-    down = down.voxel_down_sample(voxel)
-    normals = None
+    if isinstance(points, o3d.geometry.PointCloud):
+        cloud = o3d.geometry.PointCloud(points)
+    else:
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points)))
+    origin = np.zeros(3)
+    if downsample:
+        origin = np.asarray(cloud.points).mean(axis=0) if centre is None else np.asarray(centre)
+        if origin.any():
+            cloud.translate(-origin)
+        cloud = cloud.voxel_down_sample(voxel)
     if normal_radius is not None:
-        estimate_normals(down, normal_radius)
-        normals = np.asarray(down.normals).copy()
-    kept = np.asarray(down.points) + origin
+        estimate_normals(cloud, normal_radius)
+    normals = np.asarray(cloud.normals).copy() if cloud.has_normals() else None
+    kept = np.asarray(cloud.points).copy()
+    if origin.any():
+        kept += origin
     features = None
     if descriptor is not None:
         features = describe_global(descriptor, kept, voxel, settings, viewpoint)

@@ -199,6 +199,9 @@ class RegistrationResult:
         The resolution the thresholds were derived from.
     seconds : float
         Wall time of the whole registration.
+    preparation_seconds : float
+        Of ``seconds``, the time spent preparing the clouds before the first step:
+        downsampling them for the global step and describing them.
     distance : float
         The correspondence distance ``fitness`` was measured at.
     converged : bool
@@ -229,6 +232,7 @@ class RegistrationResult:
     distance: float = 0.0
     converged: bool = True
     ambiguous: bool = False
+    preparation_seconds: float = 0.0
 
     def to_open3d(self):
         """This result as an ``open3d.pipelines.registration.RegistrationResult``
@@ -254,6 +258,7 @@ class RegistrationResult:
         voxel_size: float,
         seconds: float,
         distance: float,
+        preparation_seconds: float = 0.0,
     ) -> RegistrationResult:
         """A result from the measurements behind its flags (``flags.Quality``): its
         fitness, inlier RMSE and inlier pairs are ``quality.final``'s, its flags
@@ -270,6 +275,7 @@ class RegistrationResult:
             distance=distance,
             converged=quality.converged,
             ambiguous=quality.ambiguous,
+            preparation_seconds=preparation_seconds,
         )
 
     def as_dict(self) -> dict:
@@ -284,6 +290,7 @@ class RegistrationResult:
             "converged": self.converged,
             "ambiguous": self.ambiguous,
             "seconds": self.seconds,
+            "preparation_seconds": self.preparation_seconds,
             "steps": [s.as_dict() for s in self.steps],
         }
 
@@ -315,6 +322,7 @@ class RegistrationResult:
                 distance=float(body["distance"]),
                 converged=bool(body["converged"]),
                 ambiguous=bool(body["ambiguous"]),
+                preparation_seconds=float(body["preparation_seconds"]),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None

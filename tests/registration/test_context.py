@@ -98,3 +98,88 @@ def test_a_prepared_scan_is_described_as_a_pair_describes_it():
     # FPFH's own "auto" radii (from the prepared cloud's spacing) describe otherwise.
     own = np.abs(prepared.features - FPFHTransformer().transform(prepared.points))
     assert np.median(own) > 1.0 and own.mean() > 1.0
+
+
+class _Counting:
+    """A descriptor that counts the clouds it describes."""
+
+    def __init__(self, inner):
+        self.inner, self.calls = inner, 0
+
+    def transform(self, X):
+        self.calls += 1
+        return self.inner.transform(X)
+
+
+def test_preparation_is_the_pipelines_first_stage(pretrained32):
+    """Both clouds are prepared and described once, before the first step, for every
+    global step that shares the descriptor; a chain without a global step prepares
+    nothing. The result says what the preparation cost."""
+    from o3d_rpointhop import PointToPlaneICP, RANSACGlobal, RegistrationPipeline, SVDGlobal
+    from o3d_rpointhop.registration import RegistrationContext
+
+    target = make_object(3000, shape_seed=8, sample_seed=1)
+    source = make_object(3000, shape_seed=8, sample_seed=2) + 0.1
+    counting = _Counting(pretrained32)
+    seen = {}
+
+    class Looking(SVDGlobal):
+        def _run(self, context, transformation):
+            seen["features"] = sorted(context._features)  # what was ready before it ran
+            seen["calls"] = counting.calls
+            return super()._run(context, transformation)
+
+    pipeline = RegistrationPipeline(
+        [("global", RANSACGlobal()), ("second", Looking()), ("icp", PointToPlaneICP())],
+        descriptor=counting,
+    )
+    context = RegistrationContext(source, target, descriptor=counting)
+    result = pipeline.run(context)
+    assert counting.calls == 2 and seen["calls"] == 2
+    assert seen["features"] == [("own", "source"), ("own", "target")]
+    assert 0.0 < result.preparation_seconds < result.seconds
+    assert result.as_dict()["preparation_seconds"] == result.preparation_seconds
+
+    alone = _Counting(pretrained32)
+    icp_only = RegistrationPipeline([("icp", PointToPlaneICP())], descriptor=alone)
+    assert icp_only.register(source, target).preparation_seconds == 0.0
+    assert alone.calls == 0
+
+
+def test_prepare_cloud_keeps_normals_and_places_its_grid():
+    """prepare_cloud: an Open3D cloud's normals kept (averaged per voxel), the caller's
+    cloud untouched, the grid's centre changing nothing but rounding, and a cloud kept
+    as it is without downsampling."""
+    import open3d as o3d
+
+    from o3d_rpointhop.registration.prepared import prepare_cloud
+
+    points = make_object(3000, shape_seed=4) + [5000.0, -300.0, 20.0]
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud.normals = o3d.utility.Vector3dVector(np.tile([0.0, 0.0, 1.0], (len(points), 1)))
+    before = np.asarray(cloud.points).copy()
+    own = prepare_cloud(cloud, 0.05)
+    np.testing.assert_array_equal(np.asarray(cloud.points), before)
+    assert own.normals is not None and np.allclose(own.normals, [0.0, 0.0, 1.0])
+    assert len(own.points) < len(points)
+    elsewhere = prepare_cloud(points, 0.05, centre=points[0])
+    assert elsewhere.normals is None
+    np.testing.assert_allclose(
+        np.sort(elsewhere.points, axis=0), np.sort(own.points, axis=0), atol=1e-6
+    )
+    kept = prepare_cloud(points, 0.05, downsample=False)
+    np.testing.assert_array_equal(kept.points, points)
+
+
+def test_the_coarse_context_shares_the_frame():
+    """The trial refinements' coarse context holds the global clouds in this context's
+    frame, without centring them again."""
+    from o3d_rpointhop.registration import RegistrationContext
+
+    cloud = make_object(20000, shape_seed=5) + 100.0
+    context = RegistrationContext(cloud + 0.01, cloud)
+    coarse = context.coarse()
+    assert coarse is not context and not coarse.origin.any()
+    np.testing.assert_array_equal(
+        np.asarray(coarse.source.points), np.asarray(context.global_cloud("source").points)
+    )

@@ -60,6 +60,12 @@ class RegistrationStep(BaseEstimator):
     def _check_params(self) -> None:
         """Checks beyond the declarative constraints; nothing by default."""
 
+    def _descriptors(self) -> tuple:
+        """The descriptors whose features the step will read (``None``: the context's
+        own): what the pipeline's preparation stage computes before the first step.
+        None by default."""
+        return ()
+
     def run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         """Validate the parameters, then run the step; return its result (its
         transformation is absolute, in the context's centred frame).

@@ -32,6 +32,9 @@ class GlobalStep(RegistrationStep):
 
     kind = "global"
 
+    def _descriptors(self) -> tuple:
+        return (self.descriptor,)
+
     def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
         # None: the context's descriptors (prepared, or its descriptor's).
         return (
