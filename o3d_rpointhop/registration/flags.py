@@ -109,17 +109,24 @@ def assess(
     transformation: np.ndarray,
     distance: float,
     ambiguity: bool = True,
+    margin: float = 1.0,
 ) -> Quality:
     """Measure ``transformation`` (in the context's centred frame) and set its flags:
     not converged when fewer than :data:`MIN_FITNESS` of the source points have a partner
     within ``distance`` or the partners within three resolutions spread like a chance
     alignment's (:data:`MAX_SPREAD`); ambiguous (only measured with ``ambiguity``) when
-    a 180-degree twin keeps :data:`AMBIGUITY_RATIO` of the fitness."""
+    a 180-degree twin keeps :data:`AMBIGUITY_RATIO` of the fitness, or when the global
+    step's verified hypotheses left the winner a ``margin`` under ``1 -
+    AMBIGUITY_RATIO`` over a distinct runner-up."""
     final = context.evaluate(transformation, distance)
     wide = max(distance, context.settings.spread_distance)
     spread = context.evaluate(transformation, wide).inlier_rmse / wide
     converged = final.fitness >= MIN_FITNESS and spread <= MAX_SPREAD
-    ambiguous = ambiguity and converged and _ambiguous(context, transformation, wide)
+    ambiguous = (
+        ambiguity
+        and converged
+        and (margin < 1.0 - AMBIGUITY_RATIO or _ambiguous(context, transformation, wide))
+    )
     return Quality(final=final, spread=spread, wide=wide, converged=converged, ambiguous=ambiguous)
 
 

@@ -344,7 +344,8 @@ class RegistrationPipeline(_BaseComposition):
                 outcome.seconds,
             )
         distance = results[-1].distance
-        quality = assess(context, current, distance, ambiguity)
+        margin = min((r.info["margin"] for r in results if "margin" in r.info), default=1.0)
+        quality = assess(context, current, distance, ambiguity, margin)
         log.info(
             "registered at resolution %.4g: fitness %.3f within %.4g, converged %s, "
             "ambiguous %s, %.2f s",

@@ -234,6 +234,15 @@ class RegistrationResult:
     ambiguous: bool = False
     preparation_seconds: float = 0.0
 
+    @property
+    def margin(self) -> float | None:
+        """How far the global step's chosen hypothesis scored above its best distinct
+        rival (``1 - rival / chosen``; 1 when no rival was distinct, below 0 when a
+        rival scored higher without beating the step's own choice by enough to replace
+        it), when it verified several (``n_hypotheses``); None when it did not."""
+        margins = [s.info["margin"] for s in self.steps if "margin" in s.info]
+        return min(margins) if margins else None
+
     def to_open3d(self):
         """This result as an ``open3d.pipelines.registration.RegistrationResult``
         (transformation, fitness, inlier RMSE and correspondence set)."""

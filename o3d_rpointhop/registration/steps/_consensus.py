@@ -36,6 +36,7 @@ import numpy as np
 from ..._utils.compiled import kernel, popcount
 from ..._utils.threads import run_blocks
 from ...transforms import from_centred, rigid_transform, rigid_transforms
+from ._hypotheses import DISTINCT_SHIFT, distinct
 from ._refit import refit_while_growing
 
 __all__ = [
@@ -60,12 +61,16 @@ class ConsensusResult:
     n_hypotheses : int
     seeds : ndarray of int
         The seed matches the hypotheses grew from.
+    hypotheses : ndarray of shape (k, 4, 4)
+        The best-scored ``n_hypotheses`` distinct hypotheses, each refitted, best first
+        (``transformation`` is the first); empty without an estimate.
     """
 
     transformation: np.ndarray
     inliers: np.ndarray
     n_hypotheses: int
     seeds: np.ndarray
+    hypotheses: np.ndarray
 
 
 @kernel(nogil=True)
@@ -382,6 +387,7 @@ def consensus(
     set_size: int = 30,
     weighted_refit: bool = False,
     upright=None,
+    n_hypotheses: int = 1,
     n_threads: int = 1,
 ) -> ConsensusResult:
     """A rigid motion from putative matches ``source[i] <-> target[i]`` by consensus.
@@ -420,6 +426,9 @@ def consensus(
     upright : callable, default=None
         ``upright(rotations) -> bool mask``: hypotheses it rejects cannot win (an
         up-axis prior); ``None`` keeps all.
+    n_hypotheses : int, default=1
+        How many of the best-scored distinct hypotheses to return, each refitted
+        (:func:`~._hypotheses.distinct`).
     n_threads : int, default=1
         Threads of the compiled set building and scoring (the result does not depend
         on it).
@@ -464,15 +473,27 @@ def consensus(
             n_threads,
         )
         allowed = np.ones(len(score), dtype=bool) if upright is None else upright(rot)
-        best = int(np.argmax(np.where(allowed, score, -1.0)))  # the first of equal scores
-    if len(seeds) and allowed[best]:
-        transformation[:3, :3], transformation[:3, 3] = rot[best], shift[best]
-        transformation, inliers = _refit(
-            transformation, source, target, sq_inlier, weighted=weighted_refit
-        )
+        # Best score first (the first of equal ones); hypotheses the up prior rejects
+        # cannot win.
+        order = np.argsort(-score, kind="stable")
+        order = order[allowed[order]]
+    hypotheses = np.empty((0, 4, 4))
+    if len(seeds) and len(order):
+        pool = np.tile(np.eye(4), (len(order), 1, 1))
+        pool[:, :3, :3], pool[:, :3, 3] = rot[order], shift[order]
+        apart = DISTINCT_SHIFT * inlier_threshold
+        picked = pool[distinct(pool, n_hypotheses, source.mean(axis=0), apart)]
+        refits = [_refit(t, source, target, sq_inlier, weighted=weighted_refit) for t in picked]
+        hypotheses = np.stack([t for t, _ in refits])
+        transformation, inliers = refits[0]
     else:  # no hypothesis, or none the up prior allows: no estimate
         inliers = _within(transformation, source, target, sq_inlier)
     transformation = from_centred(transformation, centre)  # back from the centred frame
+    hypotheses = np.array([from_centred(t, centre) for t in hypotheses]).reshape(-1, 4, 4)
     return ConsensusResult(
-        transformation=transformation, inliers=inliers, n_hypotheses=len(seeds), seeds=seeds
+        transformation=transformation,
+        inliers=inliers,
+        n_hypotheses=len(seeds),
+        seeds=seeds,
+        hypotheses=hypotheses,
     )

@@ -12,13 +12,29 @@ from ..context import RegistrationContext
 from ..correspondences import Correspondences, find_correspondences
 from ..result import StepResult
 from ._base import RegistrationStep
+from ._hypotheses import verify
 
-__all__ = ["GlobalStep", "DESCRIPTOR", "COUNT"]
+__all__ = ["GlobalStep", "DESCRIPTOR", "COUNT", "HYPOTHESES", "N_HYPOTHESES_DOC"]
 
 #: The constraint of a step's own descriptor: ``None`` (the pipeline's) or a transformer.
 DESCRIPTOR = [None, HasMethods(["transform"])]
 #: The constraint of a count of matches: at least 3, or a share in (0, 1].
 COUNT = [Interval(Integral, 3, None, closed="left"), Interval(Real, 0, 1, closed="right")]
+#: The constraint of a count of hypotheses verified by overlap.
+HYPOTHESES = [Interval(Integral, 1, None, closed="left")]
+
+#: The docstring of ``n_hypotheses``, shared by the steps that have it.
+N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
+        How many of the step's best distinct hypotheses are verified by overlap: each
+        is refined by a short point-to-plane ICP on the global clouds and scored by
+        how much of both clouds it brings together (inliers both ways where the
+        normals agree, each weighted by its distance) times the matches it explains;
+        one ranked below the step's own choice replaces it only when it scores 30 %
+        higher. The step's ``info`` then holds every score, the chosen hypothesis and
+        its ``margin`` over its best distinct rival (``result.margin``; one under
+        ``1 - AMBIGUITY_RATIO`` makes the result ``ambiguous``). 1: the step's own
+        ranking decides, nothing is verified (docs/registration.md, "Pairs that
+        overlap little")."""
 
 
 class GlobalStep(RegistrationStep):
@@ -41,6 +57,33 @@ class GlobalStep(RegistrationStep):
             context.features(self.descriptor, "source"),
             context.features(self.descriptor, "target"),
         )
+
+    def _chosen(
+        self,
+        context: RegistrationContext,
+        hypotheses: np.ndarray,
+        estimate: np.ndarray,
+        distance: float,
+        corr: Correspondences,
+    ) -> tuple[np.ndarray, dict]:
+        """The estimate the step returns, and what its choice reports: with several
+        hypotheses (best first, ``estimate`` the first), the winner of their
+        verification (:func:`~._hypotheses.verify`, against the step's matches
+        ``corr``) as the step estimated it (the short ICP only scores it: the steps
+        after it refine; the step's own choice, kept, is the result ``n_hypotheses=1``
+        gives); else ``estimate``."""
+        if len(hypotheses) < 2:
+            return estimate, {}
+        src, tgt = (np.asarray(c.points) for c in context.clouds("global"))
+        check = verify(
+            context, hypotheses, distance, (src[corr.pairs[:, 0]], tgt[corr.pairs[:, 1]])
+        )
+        info = {
+            "hypothesis_scores": [round(float(s), 6) for s in check.scores],
+            "chosen_hypothesis": check.best,
+            "margin": check.margin,
+        }
+        return hypotheses[check.best], info
 
     def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
         src, tgt = self._describe(context)

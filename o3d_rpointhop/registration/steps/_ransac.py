@@ -26,6 +26,7 @@ from ..._utils.cells import CellGrid
 from ..._utils.compiled import kernel
 from ...transforms import from_centred, rigid_transform, rigid_transforms
 from ._edges import consistent_edges
+from ._hypotheses import DISTINCT_SHIFT, distinct
 from ._refit import refit_while_growing
 
 __all__ = ["RansacResult", "ransac"]
@@ -49,11 +50,15 @@ class RansacResult:
         Correspondences within the threshold under ``transformation``.
     iterations : int
         Hypotheses drawn.
+    hypotheses : ndarray of shape (k, 4, 4)
+        The best ``n_hypotheses`` distinct hypotheses, each refitted, best first
+        (``transformation`` is the first); empty when no sample passed the checkers.
     """
 
     transformation: np.ndarray
     inliers: np.ndarray
     iterations: int
+    hypotheses: np.ndarray
 
 
 @kernel()
@@ -103,9 +108,9 @@ def _needed(ratio: float, confidence: float, sample: int) -> float:
     return np.log(1.0 - confidence) / np.log1p(-good)
 
 
-def _verify(rot, shift, clouds, grid: CellGrid) -> int:
-    """Index of the hypothesis with the best fitness, then inlier RMSE, on whole clouds
-    (the first on a tie)."""
+def _verify(rot, shift, clouds, grid: CellGrid) -> np.ndarray:
+    """The hypotheses ranked by fitness, then inlier RMSE, on whole clouds (the first
+    drawn on a tie)."""
     source = clouds[0]
     moved = _moved_clouds(rot, shift, source)
     dist, _ = grid.nearest(moved.reshape(-1, 3))
@@ -116,7 +121,7 @@ def _verify(rot, shift, clouds, grid: CellGrid) -> int:
     with np.errstate(invalid="ignore", divide="ignore"):
         rmse = np.sqrt(squares.sum(axis=1) / inside.sum(axis=1))
     rmse[~inside.any(axis=1)] = np.inf
-    return int(np.lexsort((rmse, -fitness))[0])
+    return np.lexsort((rmse, -fitness))
 
 
 def _refit_on_clouds(transformation, clouds, grid: CellGrid, rounds: int = 5):
@@ -162,6 +167,7 @@ def ransac(
     ransac_n: int = 3,
     clouds: tuple[np.ndarray, np.ndarray] | None = None,
     upright=None,
+    n_hypotheses: int = 1,
 ) -> RansacResult:
     """Robust rigid fit to putative matches ``source[i] <-> target[i]``.
 
@@ -188,6 +194,9 @@ def ransac(
     upright : callable, default=None
         ``upright(rotations) -> bool mask``: hypotheses it rejects are dropped (an
         up-axis prior); ``None`` keeps all.
+    n_hypotheses : int, default=1
+        How many of the best-ranked distinct hypotheses to return, each refitted
+        (:func:`~._hypotheses.distinct`).
 
     Returns
     -------
@@ -244,19 +253,28 @@ def ransac(
         if len(pool_count):
             needed = _needed(pool_count[0] / m, confidence, ransac_n)
     transformation = np.eye(4)
-    if not len(pool_count):  # no sample passed the checkers: no estimate
-        pass
-    elif clouds is not None:
-        grid = CellGrid(clouds[1], threshold)
-        best = _verify(pool_rot, pool_shift, clouds, grid)
-        transformation[:3, :3], transformation[:3, 3] = pool_rot[best], pool_shift[best]
-        transformation = _refit_on_clouds(transformation, clouds, grid)
-    else:
-        transformation[:3, :3], transformation[:3, 3] = pool_rot[0], pool_shift[0]
-        transformation = _refit_on_matches(transformation, planes, sq_threshold, source, target)
+    hypotheses = np.empty((0, 4, 4))
+    if len(pool_count):
+        pool = np.tile(np.eye(4), (len(pool_rot), 1, 1))
+        pool[:, :3, :3], pool[:, :3, 3] = pool_rot, pool_shift
+        if clouds is not None:
+            grid = CellGrid(clouds[1], threshold)
+            pool = pool[_verify(pool_rot, pool_shift, clouds, grid)]
+        picked = pool[distinct(pool, n_hypotheses, source.mean(axis=0), DISTINCT_SHIFT * threshold)]
+        if clouds is not None:
+            hypotheses = np.stack([_refit_on_clouds(t, clouds, grid) for t in picked])
+        else:
+            hypotheses = np.stack(
+                [_refit_on_matches(t, planes, sq_threshold, source, target) for t in picked]
+            )
+        transformation = hypotheses[0]
+    # else: no sample passed the checkers, no estimate
     inliers = (
         _residuals(transformation[None, :3, :3], transformation[None, :3, 3], *planes)[0]
         < sq_threshold
     )
     transformation = from_centred(transformation, centre)  # back from the centred frame
-    return RansacResult(transformation=transformation, inliers=inliers, iterations=drawn)
+    hypotheses = np.array([from_centred(t, centre) for t in hypotheses]).reshape(-1, 4, 4)
+    return RansacResult(
+        transformation=transformation, inliers=inliers, iterations=drawn, hypotheses=hypotheses
+    )

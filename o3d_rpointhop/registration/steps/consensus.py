@@ -15,7 +15,7 @@ from ..correspondences import Correspondences, find_correspondences
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
-from ._global import DESCRIPTOR, GlobalStep
+from ._global import DESCRIPTOR, HYPOTHESES, N_HYPOTHESES_DOC, GlobalStep
 
 __all__ = ["ConsensusGlobal"]
 
@@ -96,6 +96,7 @@ class ConsensusGlobal(GlobalStep):
         within ``OMP_NUM_THREADS``, ``threadpoolctl``'s limits, ``joblib.parallel_config``
         and, inside a joblib worker, one; ``-1``: all cores); the result does not
         depend on it.
+    {n_hypotheses}
     """
 
     name = "consensus"
@@ -118,6 +119,7 @@ class ConsensusGlobal(GlobalStep):
         "set_size": [Interval(Integral, 2, None, closed="left")],
         "weighted_refit": ["boolean"],
         "n_jobs": [None, Integral],
+        "n_hypotheses": HYPOTHESES,
     }
 
     def __init__(
@@ -140,6 +142,7 @@ class ConsensusGlobal(GlobalStep):
         set_size: int = 30,
         weighted_refit: bool = False,
         n_jobs: int | None = None,
+        n_hypotheses: int = 1,
     ) -> None:
         self.descriptor = descriptor
         self.max_correspondence_distance = max_correspondence_distance
@@ -158,6 +161,7 @@ class ConsensusGlobal(GlobalStep):
         self.set_size = set_size
         self.weighted_refit = weighted_refit
         self.n_jobs = n_jobs
+        self.n_hypotheses = n_hypotheses
 
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
@@ -201,14 +205,25 @@ class ConsensusGlobal(GlobalStep):
             set_size=int(self.set_size),
             weighted_refit=self.weighted_refit,
             upright=None if context.up is None else context.upright,
+            n_hypotheses=int(self.n_hypotheses),
             n_threads=kernel_threads(self.n_jobs),
+        )
+        estimate, chosen = self._chosen(
+            context, found.hypotheses, found.transformation, distance, corr
         )
         return self._measured(
             context,
             self.name,
-            found.transformation,
+            estimate,
             distance,
             corr,
             inlier_matches=int(found.inliers.sum()),
             hypotheses=found.n_hypotheses,
+            **chosen,
         )
+
+
+if ConsensusGlobal.__doc__:  # None under python -OO
+    ConsensusGlobal.__doc__ = ConsensusGlobal.__doc__.replace(
+        "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
+    )

@@ -11,7 +11,7 @@ from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
-from ._global import DESCRIPTOR, GlobalStep
+from ._global import DESCRIPTOR, HYPOTHESES, N_HYPOTHESES_DOC, GlobalStep
 from ._ransac import ransac
 
 __all__ = ["RANSACGlobal"]
@@ -56,6 +56,7 @@ class RANSACGlobal(GlobalStep):
         inlier distance of the target (Open3D's rule), then refitted on those cloud
         pairs; ``"matches"``, by the matches it carries (then their residuals), then
         refitted on those matches, as correspondence-graph estimators score.
+    {n_hypotheses}
     """
 
     name = "ransac"
@@ -70,6 +71,7 @@ class RANSACGlobal(GlobalStep):
         "ransac_n": [Interval(Integral, 3, None, closed="left")],
         "edge_length": [Interval(Real, 0, 1, closed="left")],
         "selection": [StrOptions({"fitness", "matches"})],
+        "n_hypotheses": HYPOTHESES,
     }
 
     def __init__(
@@ -84,6 +86,7 @@ class RANSACGlobal(GlobalStep):
         ransac_n: int = 3,
         edge_length: float = 0.9,
         selection: str = "fitness",
+        n_hypotheses: int = 3,
     ) -> None:
         self.descriptor = descriptor
         self.max_correspondence_distance = max_correspondence_distance
@@ -94,6 +97,7 @@ class RANSACGlobal(GlobalStep):
         self.ransac_n = ransac_n
         self.edge_length = edge_length
         self.selection = selection
+        self.n_hypotheses = n_hypotheses
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distance = self.max_correspondence_distance or context.settings.ransac_distance
@@ -111,13 +115,24 @@ class RANSACGlobal(GlobalStep):
             ransac_n=int(self.ransac_n),
             clouds=(src, tgt) if self.selection == "fitness" else None,
             upright=None if context.up is None else context.upright,
+            n_hypotheses=int(self.n_hypotheses),
+        )
+        estimate, chosen = self._chosen(
+            context, found.hypotheses, found.transformation, distance, corr
         )
         return self._measured(
             context,
             self.name,
-            found.transformation,
+            estimate,
             distance,
             corr,
             inlier_matches=int(found.inliers.sum()),
             iterations=found.iterations,
+            **chosen,
         )
+
+
+if RANSACGlobal.__doc__:  # None under python -OO
+    RANSACGlobal.__doc__ = RANSACGlobal.__doc__.replace(
+        "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=3)
+    )

@@ -137,5 +137,8 @@ def test_verification_ranks_by_fitness_then_rmse_then_order():
     ]
     rot = np.array([c[:3, :3] for c in candidates])
     shift = np.array([c[:3, 3] for c in candidates])
-    assert _verify(rot, shift, (cloud, moved), grid) == 2
-    assert _verify(rot[[0, 4, 1]], shift[[0, 4, 1]], (cloud, moved), grid) == 2
+    # The whole ranking: fitness, then RMSE, then the order drawn.
+    np.testing.assert_array_equal(_verify(rot, shift, (cloud, moved), grid), [2, 3, 1, 4, 0])
+    np.testing.assert_array_equal(
+        _verify(rot[[0, 4, 1]], shift[[0, 4, 1]], (cloud, moved), grid), [2, 1, 0]
+    )

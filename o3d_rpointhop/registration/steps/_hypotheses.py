@@ -1,0 +1,182 @@
+"""Hypotheses verified by overlap: a global step's best few distinct estimates, each
+refined by a short ICP on the global clouds and scored by how much of both clouds it
+brings together.
+
+A global step ranks its hypotheses by what it sees, the matches (or, for RANSAC, the
+source's fitness). On a pair that overlaps little, a wrong hypothesis can carry more
+matches than the right one: matches from parts the other cloud never saw agree by
+chance on a repeated structure. Refining each of a few distinct hypotheses and scoring
+the refined poses on the clouds themselves, in both directions, lets the right one win
+once it fits better; the winner's margin over the runner-up says how sure the choice
+was.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "DISTINCT_ANGLE_DEG",
+    "Verification",
+    "distinct",
+    "match_support",
+    "overlap_score",
+    "verify",
+]
+
+#: Two hypotheses are distinct when their rotations differ by more than this, or their
+#: motions of the source's centre by more than the step's inlier distance times
+#: :data:`DISTINCT_SHIFT`.
+DISTINCT_ANGLE_DEG = 10.0
+DISTINCT_SHIFT = 3.0
+#: Two points overlap only when their normals agree within this angle.
+NORMAL_ANGLE_DEG = 30.0
+#: A hypothesis ranked below the step's own first replaces it only when it scores more
+#: than this share higher: where two poses fit alike (a symmetric shape), the step's
+#: own ranking keeps the say.
+SWITCH_MARGIN = 0.3
+#: ICP iterations a hypothesis is refined by before it is scored.
+REFINE_ITERATIONS = 15
+
+
+@dataclass
+class Verification:
+    """The outcome of :func:`verify`.
+
+    Attributes
+    ----------
+    best : int
+        Index of the winning hypothesis.
+    scores : ndarray of shape (k,)
+        Every hypothesis's overlap score after its refinement, in the order given.
+    refined : ndarray of shape (k, 4, 4)
+        The refined hypotheses.
+    margin : float
+        ``1 - rival / winner``, the rival being the best-scored hypothesis that did not
+        refine into the winner (1 when there is none): 0 is a tie, and below 0 a rival
+        scored higher without beating the step's own choice by :data:`SWITCH_MARGIN`.
+    """
+
+    best: int
+    scores: np.ndarray
+    refined: np.ndarray
+    margin: float
+
+
+def _apart(many: np.ndarray, one: np.ndarray, centre: np.ndarray, shift: float) -> np.ndarray:
+    """Which of the motions ``many`` (b, 4, 4) differ from ``one`` by more than
+    :data:`DISTINCT_ANGLE_DEG` or move ``centre`` more than ``shift`` apart from it."""
+    cos = (np.einsum("bji,ji->b", many[:, :3, :3], one[:3, :3]) - 1.0) / 2.0
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    moved = (many[:, :3, :3] - one[:3, :3]) @ centre + many[:, :3, 3] - one[:3, 3]
+    return (angle > DISTINCT_ANGLE_DEG) | (np.linalg.norm(moved, axis=1) > shift)
+
+
+def distinct(transformations: np.ndarray, k: int, centre: np.ndarray, shift: float) -> np.ndarray:
+    """Indices of the first ``k`` of ``transformations`` (b, 4, 4; best first) that are
+    distinct from every one taken before them (their rotations more than
+    :data:`DISTINCT_ANGLE_DEG` apart, or ``centre`` moved more than ``shift`` apart)."""
+    taken: list[int] = []
+    open_ = np.ones(len(transformations), dtype=bool)
+    while len(taken) < k and open_.any():
+        i = int(np.argmax(open_))
+        taken.append(i)
+        open_ &= _apart(transformations, transformations[i], centre, shift)
+    return np.asarray(taken, dtype=np.int64)
+
+
+def overlap_score(
+    source: np.ndarray,
+    target: np.ndarray,
+    transformation: np.ndarray,
+    distance: float,
+    normals: tuple[np.ndarray, np.ndarray] | None = None,
+) -> float:
+    """How well ``transformation`` brings the two clouds together where they can meet:
+    every source point within ``distance`` of the target, and every target point within
+    ``distance`` of the moved source, each counted by the truncated quadratic ``1 -
+    (r / distance)^2`` of its distance ``r`` (with ``normals``, only where the two
+    points' normals agree within :data:`NORMAL_ANGLE_DEG`, either sign: surfaces that
+    cross are not an overlap); the sum over both clouds, divided by the smaller cloud's
+    size (the most points the overlap can hold on one side)."""
+    rot = transformation[:3, :3]
+    moved = source @ rot.T + transformation[:3, 3]
+    total = 0.0
+    cos = np.cos(np.radians(NORMAL_ANGLE_DEG))
+    turned = None if normals is None else (normals[0] @ rot.T, normals[1])
+    for side, (a, b) in enumerate(((moved, target), (target, moved))):
+        r, idx = cKDTree(b).query(a, distance_upper_bound=distance)
+        inside = np.isfinite(r)
+        weight = 1.0 - (r[inside] / distance) ** 2
+        if turned is not None:
+            na, nb = turned[side], turned[1 - side]
+            agree = np.abs(np.einsum("ij,ij->i", na[inside], nb[idx[inside]])) >= cos
+            weight = weight[agree]
+        total += float(np.sum(weight))
+    return total / min(len(source), len(target))
+
+
+def match_support(
+    matched: tuple[np.ndarray, np.ndarray], transformation: np.ndarray, distance: float
+) -> float:
+    """The step's matches ``(source points, target points)`` that ``transformation``
+    explains, each counted by the truncated quadratic of its residual within
+    ``distance``: what the step itself ranks by."""
+    a, b = matched
+    r2 = ((a @ transformation[:3, :3].T + transformation[:3, 3] - b) ** 2).sum(axis=1)
+    return float(np.clip(1.0 - r2 / (distance * distance), 0.0, None).sum())
+
+
+def verify(
+    context, hypotheses: np.ndarray, distance: float, matched: tuple[np.ndarray, np.ndarray]
+) -> Verification:
+    """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
+    global clouds within ``distance`` and score it by its :func:`overlap_score` (with
+    normals) times its :func:`match_support`: the clouds must meet where the pose puts
+    them, and the matches must agree with it. The best score wins if it beats the first
+    hypothesis's (the step's own choice) by more than :data:`SWITCH_MARGIN`; else the
+    first stays.
+
+    Parameters
+    ----------
+    context : RegistrationContext
+    hypotheses : ndarray of shape (k, 4, 4)
+        Best first, as the global step ranked them.
+    distance : float
+        The step's inlier distance: the ICP's correspondence distance and the score's.
+    matched : (ndarray, ndarray)
+        The step's matched source and target points (centred frame), row by row.
+
+    Returns
+    -------
+    Verification
+    """
+    from .icp import PointToPlaneICP
+
+    coarse = context.coarse()
+    icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
+    source = np.asarray(coarse.source.points)
+    target = np.asarray(coarse.target.points)
+    refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
+    radius = context.settings.normal_radius
+    normals = tuple(
+        np.asarray(coarse.with_normals(cloud, f"{which}-verify", radius).normals)
+        for cloud, which in ((coarse.source, "source"), (coarse.target, "target"))
+    )
+    scores = np.array(
+        [
+            overlap_score(source, target, t, distance, normals)
+            * match_support(matched, t, distance)
+            for t in refined
+        ]
+    )
+    best = int(np.argmax(scores))
+    if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
+        best = 0
+    centre = source.mean(axis=0)
+    rivals = scores[_apart(refined, refined[best], centre, DISTINCT_SHIFT * distance)]
+    margin = 1.0 if not len(rivals) or scores[best] <= 0 else 1.0 - rivals.max() / scores[best]
+    return Verification(best=best, scores=scores, refined=refined, margin=float(margin))
