@@ -11,6 +11,7 @@ from ..descriptors import RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS
 from ..registration.settings import resolve_voxel_size
+from .diagnostics import choice_diagnostics
 from .metrics import is_symmetry, modified_chamfer, pair_errors, summarize
 from .records import PairRecord
 from .runner import run_method
@@ -130,6 +131,9 @@ def evaluate_methods(pairs, methods, model, voxel_of, seed, progress, shapes=Non
                     pair=pair.name,
                     symmetric=symmetric,
                     chamfer=chamfer,
+                    diagnostics=(
+                        None if run.result is None else choice_diagnostics(run.result, pair.truth)
+                    ),
                 )
             )
             progress.step(method)

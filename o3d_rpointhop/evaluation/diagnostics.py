@@ -26,6 +26,7 @@ from ..transforms import apply_transform
 
 __all__ = [
     "FRAME_ANGLE_DEG",
+    "choice_diagnostics",
     "frame_repeatability",
     "match_inliers",
     "pair_diagnostics",
@@ -173,3 +174,31 @@ def pair_diagnostics(context, descriptor: Any, truth: np.ndarray, radius: float 
     )
     repeat = frame_repeatability(frames["source"], frames["target"], pairs, local[:3, :3])
     return {**out, **repeat}
+
+
+def choice_diagnostics(result: Any, truth: np.ndarray) -> dict | None:
+    """Why a registration went as it did, from its global step: how many matches it
+    worked on and the share the truth explains (within the step's own inlier distance:
+    few right matches mean the matches failed), and, when it verified several
+    hypotheses, their scores, which one it chose and its margin (right matches but a
+    wrong pose mean the choice failed). None for a result without a global step.
+
+    Parameters
+    ----------
+    result : RegistrationResult
+    truth : ndarray of shape (4, 4)
+        The source-to-target truth in the frames the result was computed in.
+    """
+    for step in result.steps:
+        if step.matches is None:
+            continue
+        source, target = step.matches[:, 0], step.matches[:, 1]
+        distance = step.info["max_correspondence_distance"]
+        moved = apply_transform(source, truth)
+        right = np.linalg.norm(moved - target, axis=1) < distance
+        out = {"matches": int(len(right)), "match_inlier_ratio": float(right.mean())}
+        for key in ("hypothesis_scores", "chosen_hypothesis", "margin"):
+            if key in step.info:
+                out[key] = step.info[key]
+        return out
+    return None

@@ -25,7 +25,7 @@ import open3d as o3d
 
 from ..descriptors import FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
-from ..registration import register
+from ..registration import ConsensusGlobal, RANSACGlobal, register
 from .peers import (
     fpfh_fgr,
     fpfh_ransac,
@@ -43,6 +43,7 @@ __all__ = [
     "Method",
     "default_methods",
     "check_methods",
+    "claimed_by",
     "shipped_scene_model",
 ]
 
@@ -71,7 +72,8 @@ class Method:
     run : callable
         ``run(source, target, descriptor, voxel, seed, viewpoints)`` -> the 4x4
         source-to-target transformation and whether the method claims it (``None`` for
-        a method that reports no such flag); ``viewpoints`` is None or the sensor
+        a method that reports no such flag), or a whole ``RegistrationResult`` (the
+        methods through ``register()``); ``viewpoints`` is None or the sensor
         positions of the source and the target, each in its own coordinates.
     datasets : frozenset of str
         The datasets it can be run on.
@@ -123,18 +125,39 @@ class Method:
 CAMERA_UP = (0.0, -1.0, 0.0)
 
 
-def _claimed(result) -> tuple[np.ndarray, bool]:
-    """A result of :func:`~o3d_rpointhop.register` and whether its flags say it can be
-    trusted (converged, not ambiguous)."""
-    return result.transformation, bool(result.converged and not result.ambiguous)
+def claimed_by(result) -> bool:
+    """Whether a result of :func:`~o3d_rpointhop.register` says it can be trusted
+    (converged, not ambiguous)."""
+    return bool(result.converged and not result.ambiguous)
+
+
+def _resolved(options: dict) -> dict:
+    """``options`` with a callable ``global_method`` called: a fresh step per pair."""
+    chosen = dict(options)
+    if callable(chosen.get("global_method")):
+        chosen["global_method"] = chosen["global_method"]()
+    return chosen
+
+
+def ransac_3_hypotheses():
+    """RANSAC verifying its three best distinct hypotheses by overlap."""
+    return RANSACGlobal(n_hypotheses=3)
+
+
+def consensus_3_hypotheses():
+    """The consensus verifying its three best distinct hypotheses by overlap."""
+    return ConsensusGlobal(n_hypotheses=3)
 
 
 def _register_with(**options):
-    """A runner through :func:`~o3d_rpointhop.register` with ``options``."""
+    """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
+    ``global_method`` makes a fresh step per pair): it returns the whole result (the
+    runner reads its transformation, its flags and, for the records, what its global
+    step saw)."""
 
     def run(source, target, descriptor, voxel, seed, viewpoints):
-        result = register(source, target, descriptor, seed=seed, viewpoints=viewpoints, **options)
-        return _claimed(result)
+        chosen = _resolved(options)
+        return register(source, target, descriptor, seed=seed, viewpoints=viewpoints, **chosen)
 
     run.options = options  # what the records name (provenance)
     return run
@@ -160,13 +183,11 @@ def _fpfh_pipeline(**options):
     a fresh step per pair)."""
 
     def run(source, target, descriptor, voxel, seed, viewpoints):
-        chosen = dict(options)
-        if callable(chosen.get("global_method")):
-            chosen["global_method"] = chosen["global_method"]()
+        chosen = _resolved(options)
         result = register(
             source, target, FPFHTransformer(), seed=seed, viewpoints=viewpoints, **chosen
         )
-        return _claimed(result)
+        return result
 
     run.options = options
     return run
@@ -238,6 +259,14 @@ METHODS = _methods(
         model="scene",
     ),
     Method(
+        "rpointhop-scene-verified",
+        "R-PointHop, shipped scene model, consensus with three hypotheses verified by "
+        "overlap + point-to-plane ICP",
+        _register_with(global_method=consensus_3_hypotheses),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-up",
         "R-PointHop, shipped scene model, register() defaults, up-axis prior (camera -y)",
         _register_with(up=CAMERA_UP),
@@ -263,6 +292,12 @@ METHODS = _methods(
         "rpointhop-ransac-icp-4096",
         "R-PointHop + RANSAC + point-to-plane ICP, 4096 global points",
         _register_with(global_method="ransac", n_global_points=4096),
+    ),
+    Method(
+        "rpointhop-ransac-icp-verified",
+        "R-PointHop + RANSAC, three hypotheses verified by overlap + point-to-plane ICP",
+        _register_with(global_method=ransac_3_hypotheses),
+        datasets=_OBJECTS,
     ),
     Method(
         "rpointhop-ransac-icp-sym",

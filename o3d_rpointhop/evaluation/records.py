@@ -55,6 +55,10 @@ class PairRecord(_Record):
     chamfer : float or None
         RPM-Net's modified Chamfer distance (:func:`~.metrics.modified_chamfer`; None:
         the protocol keeps no whole shape to measure it against).
+    diagnostics : dict or None
+        What the global step saw (:func:`~.diagnostics.choice_diagnostics`: its matches'
+        share the truth explains, its verified hypotheses); None for a method that does
+        not run through ``register()``.
     """
 
     rotation_error_deg: float
@@ -65,8 +69,9 @@ class PairRecord(_Record):
     pair: str | None = None
     symmetric: bool | None = None
     chamfer: float | None = None
+    diagnostics: dict | None = None
 
-    _optional = frozenset({"pair", "symmetric", "chamfer"})
+    _optional = frozenset({"pair", "symmetric", "chamfer", "diagnostics"})
 
 
 @dataclass
@@ -88,6 +93,8 @@ class ScenePairRecord(_Record):
     seconds, rotation_error_deg, translation_error : float
     transformation : list
         The estimate (4 x 4, rounded to 12 decimals).
+    diagnostics : dict or None
+        As :class:`PairRecord`'s.
     """
 
     pair: str
@@ -101,6 +108,9 @@ class ScenePairRecord(_Record):
     rotation_error_deg: float
     translation_error: float
     transformation: list
+    diagnostics: dict | None = None
+
+    _optional = frozenset({"diagnostics"})
 
 
 @dataclass

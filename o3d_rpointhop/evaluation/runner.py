@@ -7,13 +7,14 @@ import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import open3d as o3d
 from joblib import parallel_config
 
-from ..registration import RegistrationWarning
-from .methods import METHODS
+from ..registration import RegistrationResult, RegistrationWarning
+from .methods import METHODS, claimed_by
 
 __all__ = [
     "THREAD_BUDGETS",
@@ -79,11 +80,15 @@ class MethodRun:
         Whether the method's own flags call the result trustworthy (``register()``:
         converged and not ambiguous; KISS-Matcher: valid); None for a method without
         such a flag. Precision is measured over the claimed results.
+    result : RegistrationResult or None
+        The whole result, for the methods that run through ``register()`` (what the
+        records' per-pair diagnostics read); None for the others.
     """
 
     transformation: np.ndarray
     seconds: float
     claimed: bool | None
+    result: Any = None
 
 
 def run_method(
@@ -132,5 +137,9 @@ def run_method(
     ):
         warnings.simplefilter("ignore", RegistrationWarning)
         start = time.perf_counter()
-        transformation, claimed = method.run(source, target, descriptor, voxel, seed, viewpoints)
-        return MethodRun(transformation, time.perf_counter() - start, claimed)
+        out = method.run(source, target, descriptor, voxel, seed, viewpoints)
+        seconds = time.perf_counter() - start
+    if isinstance(out, RegistrationResult):
+        return MethodRun(out.transformation, seconds, claimed_by(out), out)
+    transformation, claimed = out
+    return MethodRun(transformation, seconds, claimed)

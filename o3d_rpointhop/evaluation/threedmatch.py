@@ -12,7 +12,7 @@ from ..registration.context import RegistrationContext
 from ..registration.defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
 from ..transforms import rotation_error_deg, translation_error
 from ._common import Progress, machine_facts, model_facts
-from .diagnostics import pair_diagnostics
+from .diagnostics import choice_diagnostics, pair_diagnostics
 from .methods import METHODS, check_methods, shipped_scene_model
 from .metrics import mcnemar, rmse_3dmatch
 from .provenance import run_provenance
@@ -217,7 +217,10 @@ def run_3dmatch(
                 # Errors in the pair's original frames (a turned source turned back).
                 motion = motions.get(id(pair), np.eye(4))
                 estimate, truth = run.transformation @ motion, pair.truth @ motion
-                recs.append(_record(pair, estimate, truth, run.seconds, run.claimed))
+                record = _record(pair, estimate, truth, run.seconds, run.claimed)
+                if run.result is not None:  # in the frames the method saw
+                    record.diagnostics = choice_diagnostics(run.result, pair.truth)
+                recs.append(record)
                 bar.step(method)
             records[method] = recs
         unseen = [k for k, p in enumerate(chosen) if p.scene not in seen]

@@ -77,3 +77,48 @@ def test_pair_diagnostics_see_frames_repeat_with_viewpoints(fitted):
     assert off["normal_lines"] == pytest.approx(1.0) and off["normals"] < 0.9
     fpfh = pair_diagnostics(seen, FPFHTransformer(), truth)
     assert fpfh["frames"] is None and fpfh["correct_matches"] > 0
+
+
+def test_choice_diagnostics_say_whether_the_matches_or_the_choice_failed(pretrained32):
+    """The global step's matches, the share the truth explains, and its verified
+    hypotheses; a wrong truth explains none of them; no global step, no diagnostics."""
+    from o3d_rpointhop import RANSACGlobal, register
+    from o3d_rpointhop.datasets import make_object
+    from o3d_rpointhop.evaluation.diagnostics import choice_diagnostics
+
+    target = make_object(1500, shape_seed=4, sample_seed=1)
+    truth = np.eye(4)
+    truth[:3, 3] = [0.1, -0.2, 0.05]
+    source = make_object(1500, shape_seed=4, sample_seed=2) - truth[:3, 3]
+    result = register(
+        source, target, pretrained32, global_method=RANSACGlobal(n_hypotheses=3), refine=None
+    )
+    found = choice_diagnostics(result, truth)
+    assert found["matches"] == len(result.steps[0].matches)
+    assert 0.05 < found["match_inlier_ratio"] <= 1.0
+    assert len(found["hypothesis_scores"]) >= 1 and "margin" in found
+    far = truth.copy()
+    far[:3, 3] += 10.0
+    assert choice_diagnostics(result, far)["match_inlier_ratio"] == 0.0
+    alone = register(source, target, pretrained32, global_method=None)
+    assert choice_diagnostics(alone, truth) is None
+
+
+def test_records_carry_the_diagnostics_of_register_methods(pretrained32):
+    from o3d_rpointhop.datasets import make_object
+    from o3d_rpointhop.evaluation._common import Progress, evaluate_methods, fixed_resolution
+    from o3d_rpointhop.evaluation.protocols import make_pairs
+
+    shapes = np.stack([make_object(2048, shape_seed=s) for s in range(2)])
+    pairs = make_pairs(shapes, "resampled", 0)
+    _, records = evaluate_methods(
+        pairs,
+        ["rpointhop-ransac-icp", "icp"],
+        pretrained32,
+        fixed_resolution(0.05),
+        0,
+        Progress(len(pairs), "test", False),
+    )
+    ours = records["rpointhop-ransac-icp"][0].as_dict()
+    assert ours["diagnostics"]["matches"] > 0
+    assert "diagnostics" not in records["icp"][0].as_dict()  # not through register()
