@@ -139,9 +139,9 @@ def _resolved(options: dict) -> dict:
     return chosen
 
 
-def ransac_unverified():
-    """RANSAC keeping its own choice: no hypothesis verified by overlap."""
-    return RANSACGlobal(n_hypotheses=1)
+def ransac_3_hypotheses():
+    """RANSAC verifying its three best distinct hypotheses by overlap."""
+    return RANSACGlobal(n_hypotheses=3)
 
 
 def consensus_3_hypotheses():
@@ -294,10 +294,9 @@ METHODS = _methods(
         _register_with(global_method="ransac", n_global_points=4096),
     ),
     Method(
-        "rpointhop-ransac-icp-unverified",
-        "R-PointHop + RANSAC keeping its own choice (no hypothesis verified) + "
-        "point-to-plane ICP",
-        _register_with(global_method=ransac_unverified),
+        "rpointhop-ransac-icp-verified",
+        "R-PointHop + RANSAC, three hypotheses verified by overlap + point-to-plane ICP",
+        _register_with(global_method=ransac_3_hypotheses),
         datasets=_OBJECTS,
     ),
     Method(

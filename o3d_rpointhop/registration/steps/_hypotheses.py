@@ -94,6 +94,7 @@ def overlap_score(
     transformation: np.ndarray,
     distance: float,
     normals: tuple[np.ndarray, np.ndarray] | None = None,
+    target_tree: cKDTree | None = None,
 ) -> float:
     """How well ``transformation`` brings the two clouds together where they can meet:
     every source point within ``distance`` of the target, and every target point within
@@ -101,14 +102,16 @@ def overlap_score(
     (r / distance)^2`` of its distance ``r`` (with ``normals``, only where the two
     points' normals agree within :data:`NORMAL_ANGLE_DEG`, either sign: surfaces that
     cross are not an overlap); the sum over both clouds, divided by the smaller cloud's
-    size (the most points the overlap can hold on one side)."""
+    size (the most points the overlap can hold on one side). ``target_tree``: a
+    ``cKDTree`` of ``target``, built once for many transformations."""
     rot = transformation[:3, :3]
     moved = source @ rot.T + transformation[:3, 3]
     total = 0.0
     cos = np.cos(np.radians(NORMAL_ANGLE_DEG))
     turned = None if normals is None else (normals[0] @ rot.T, normals[1])
-    for side, (a, b) in enumerate(((moved, target), (target, moved))):
-        r, idx = cKDTree(b).query(a, distance_upper_bound=distance)
+    trees = (target_tree or cKDTree(target), cKDTree(moved))
+    for side, a in enumerate((moved, target)):
+        r, idx = trees[side].query(a, distance_upper_bound=distance)
         inside = np.isfinite(r)
         weight = 1.0 - (r[inside] / distance) ** 2
         if turned is not None:
@@ -160,19 +163,21 @@ def verify(
     icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
     source = np.asarray(coarse.source.points)
     target = np.asarray(coarse.target.points)
-    refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
     radius = context.settings.normal_radius
+    # The keys point-to-plane ICP caches the coarse clouds' normals under: estimated once.
     normals = tuple(
-        np.asarray(coarse.with_normals(cloud, f"{which}-verify", radius).normals)
+        np.asarray(coarse.with_normals(cloud, f"{which}-full", radius).normals)
         for cloud, which in ((coarse.source, "source"), (coarse.target, "target"))
     )
-    scores = np.array(
-        [
-            overlap_score(source, target, t, distance, normals)
-            * match_support(matched, t, distance)
-            for t in refined
-        ]
-    )
+    tree = cKDTree(target)
+
+    def score(t):
+        return overlap_score(source, target, t, distance, normals, tree) * match_support(
+            matched, t, distance
+        )
+
+    refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
+    scores = np.array([score(t) for t in refined])
     best = int(np.argmax(scores))
     if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
         best = 0
