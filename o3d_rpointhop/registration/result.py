@@ -331,7 +331,7 @@ class RegistrationResult:
                 distance=float(body["distance"]),
                 converged=bool(body["converged"]),
                 ambiguous=bool(body["ambiguous"]),
-                preparation_seconds=float(body["preparation_seconds"]),
+                preparation_seconds=float(body.get("preparation_seconds", 0.0)),  # older files
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .icp import PointToPlaneICP
+
 __all__ = [
     "DISTINCT_ANGLE_DEG",
     "Verification",
@@ -109,7 +111,7 @@ def overlap_score(
     total = 0.0
     cos = np.cos(np.radians(NORMAL_ANGLE_DEG))
     turned = None if normals is None else (normals[0] @ rot.T, normals[1])
-    trees = (target_tree or cKDTree(target), cKDTree(moved))
+    trees = (cKDTree(target) if target_tree is None else target_tree, cKDTree(moved))
     for side, a in enumerate((moved, target)):
         r, idx = trees[side].query(a, distance_upper_bound=distance)
         inside = np.isfinite(r)
@@ -157,8 +159,6 @@ def verify(
     -------
     Verification
     """
-    from .icp import PointToPlaneICP
-
     coarse = context.coarse()
     icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
     source = np.asarray(coarse.source.points)
