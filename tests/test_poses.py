@@ -125,11 +125,17 @@ def test_registration_results_round_trip(tmp_path):
         back.steps[0].correspondence_set, result.steps[0].correspondence_set
     )
     assert back.steps[0].info == json.loads(json.dumps(result.steps[0].info))
-    assert (back.fitness, back.converged, back.ambiguous) == (
+    assert (back.fitness, back.converged, back.ambiguous, back.preparation_seconds) == (
         result.fitness,
         result.converged,
         result.ambiguous,
+        result.preparation_seconds,
     )
+    # A file saved before results kept their preparation time loads with none.
+    body = json.loads((tmp_path / "r.json").read_text())
+    del body["preparation_seconds"]
+    (tmp_path / "older.json").write_text(json.dumps(body))
+    assert RegistrationResult.load(tmp_path / "older.json").preparation_seconds == 0.0
     (tmp_path / "bad.json").write_text('{"kind": "RegistrationResult", "format": 1}')
     with pytest.raises(ValueError, match="damaged saved result"):
         RegistrationResult.load(tmp_path / "bad.json")
