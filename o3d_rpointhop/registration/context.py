@@ -122,7 +122,12 @@ class RegistrationContext:
         self.target = to_point_cloud(target, "target")
         if origin is None:
             origin = self.target.get_center()
-        self.origin = np.array(origin, dtype=np.float64)
+        try:
+            self.origin = np.array(origin, dtype=np.float64)
+        except (TypeError, ValueError):
+            self.origin = np.full(3, np.nan)
+        if self.origin.shape != (3,) or not np.isfinite(self.origin).all():
+            raise ValueError(f"origin must be a finite point (3,), got {origin!r}")
         self.up = _up_vectors(up)
         self.viewpoints = None
         if viewpoints is not None:

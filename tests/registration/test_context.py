@@ -183,3 +183,12 @@ def test_the_coarse_context_shares_the_frame():
     np.testing.assert_array_equal(
         np.asarray(coarse.source.points), np.asarray(context.global_cloud("source").points)
     )
+
+
+@pytest.mark.parametrize("origin", [[0.0, 1.0], [np.nan, 0.0, 0.0], "here"])
+def test_a_bad_origin_is_refused(origin):
+    cloud = make_object(500, shape_seed=1)
+    from o3d_rpointhop.registration import RegistrationContext
+
+    with pytest.raises(ValueError, match="origin"):
+        RegistrationContext(cloud, cloud, origin=origin)
