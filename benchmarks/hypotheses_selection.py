@@ -93,7 +93,7 @@ def main() -> None:
         "dataset": "modelnet40 train subset",
         "shapes": int(len(shapes)),
         "seeds": seeds,
-        "protocols": list(PROTOCOLS),
+        "protocol_names": list(PROTOCOLS),
         "candidates": {},
     }
     out["provenance"] = run_provenance([], None)
