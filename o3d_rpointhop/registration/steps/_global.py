@@ -120,5 +120,7 @@ class GlobalStep(RegistrationStep):
         a, b = src[corr.pairs[:, 0]], tgt[corr.pairs[:, 1]]
         moved = a @ transformation[:3, :3].T + transformation[:3, 3]
         check.match_inliers = ((moved - b) ** 2).sum(axis=1) < distance * distance
+        if check.info.get("chosen_hypothesis", 0):  # the step's count was of its own choice
+            check.info["inlier_matches"] = int(check.match_inliers.sum())
         check.matches = np.stack([a, b], axis=1) + context.origin
         return check

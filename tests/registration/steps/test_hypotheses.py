@@ -112,6 +112,9 @@ def test_the_runner_up_wins_when_it_overlaps_better(step):
     info = verified.steps[0].info
     assert len(info["hypothesis_scores"]) >= 2 and info["chosen_hypothesis"] > 0
     assert verified.margin == info["margin"] and 0.2 < verified.margin <= 1.0
+    # The matches the chosen pose explains, not those of the step's own choice.
+    assert info["inlier_matches"] == int(verified.steps[0].match_inliers.sum())
+    assert info["inlier_matches"] < alone.steps[0].info["inlier_matches"]
 
 
 def test_a_small_margin_makes_the_result_ambiguous():
