@@ -146,10 +146,11 @@ def translation_error(
 
 def from_centred(transformation: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """A transformation of coordinates centred on ``centre`` (``x - centre``), for the
-    coordinates they were centred from: ``x -> R (x - c) + t + c``. A new float64 array;
-    ``from_centred(T, -centre)`` goes the other way."""
+    coordinates they were centred from: ``x -> R (x - c) + t + c``; a stack ``(k, 4, 4)``
+    transformation by transformation. A new float64 array; ``from_centred(T, -centre)``
+    goes the other way."""
     out = np.array(transformation, dtype=np.float64)
-    out[:3, 3] += centre - out[:3, :3] @ centre
+    out[..., :3, 3] += centre - out[..., :3, :3] @ centre
     return out
 
 

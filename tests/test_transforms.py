@@ -107,3 +107,17 @@ def test_translation_error_about_a_point_and_rms_displacement_by_hand():
     points = np.array([[10.0, 1.0, 0.0], [10.0, -1.0, 0.0]])
     assert rms_displacement(turn, np.eye(4), points) == pytest.approx(np.sqrt(2.0))
     assert rms_displacement(np.eye(4), np.eye(4), points) == 0.0
+
+
+def test_from_centred_takes_a_stack_matrix_by_matrix():
+    from scipy.spatial.transform import Rotation
+
+    from o3d_rpointhop.transforms import from_centred
+
+    stack = np.tile(np.eye(4), (3, 1, 1))
+    stack[:, :3, :3] = Rotation.random(3, random_state=0).as_matrix()
+    stack[:, :3, 3] = [[1.0, 2, 3], [0, -1, 0], [5, 5, 5]]
+    centre = np.array([10.0, -20.0, 3.0])
+    expected = np.stack([from_centred(t, centre) for t in stack])
+    np.testing.assert_array_equal(from_centred(stack, centre), expected)
+    assert from_centred(np.empty((0, 4, 4)), centre).shape == (0, 4, 4)

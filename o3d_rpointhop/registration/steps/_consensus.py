@@ -36,7 +36,7 @@ import numpy as np
 from ..._utils.compiled import kernel, popcount
 from ..._utils.threads import run_blocks
 from ...transforms import from_centred, rigid_transform, rigid_transforms
-from ._hypotheses import DISTINCT_SHIFT, distinct
+from ._hypotheses import pick_distinct
 from ._refit import refit_while_growing
 
 __all__ = [
@@ -479,17 +479,15 @@ def consensus(
         order = order[allowed[order]]
     hypotheses = np.empty((0, 4, 4))
     if len(seeds) and len(order):
-        pool = np.tile(np.eye(4), (len(order), 1, 1))
-        pool[:, :3, :3], pool[:, :3, 3] = rot[order], shift[order]
-        apart = DISTINCT_SHIFT * inlier_threshold
-        picked = pool[distinct(pool, n_hypotheses, source.mean(axis=0), apart)]
+        centroid = source.mean(axis=0)
+        picked = pick_distinct(rot[order], shift[order], n_hypotheses, centroid, inlier_threshold)
         refits = [_refit(t, source, target, sq_inlier, weighted=weighted_refit) for t in picked]
         hypotheses = np.stack([t for t, _ in refits])
         transformation, inliers = refits[0]
     else:  # no hypothesis, or none the up prior allows: no estimate
         inliers = _within(transformation, source, target, sq_inlier)
     transformation = from_centred(transformation, centre)  # back from the centred frame
-    hypotheses = np.array([from_centred(t, centre) for t in hypotheses]).reshape(-1, 4, 4)
+    hypotheses = from_centred(hypotheses, centre)
     return ConsensusResult(
         transformation=transformation,
         inliers=inliers,

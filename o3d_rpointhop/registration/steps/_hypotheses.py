@@ -26,6 +26,7 @@ __all__ = [
     "distinct",
     "match_support",
     "overlap_score",
+    "pick_distinct",
     "verify",
 ]
 
@@ -86,8 +87,21 @@ def distinct(transformations: np.ndarray, k: int, centre: np.ndarray, shift: flo
     while len(taken) < k and open_.any():
         i = int(np.argmax(open_))
         taken.append(i)
-        open_ &= _apart(transformations, transformations[i], centre, shift)
+        if len(taken) < k:  # only a next pick needs the others compared with this one
+            open_ &= _apart(transformations, transformations[i], centre, shift)
     return np.asarray(taken, dtype=np.int64)
+
+
+def pick_distinct(
+    rotations: np.ndarray, shifts: np.ndarray, k: int, centre: np.ndarray, threshold: float
+) -> np.ndarray:
+    """The first ``k`` distinct of the motions ``rotations`` (b, 3, 3) and ``shifts``
+    (b, 3), best first, as ``(k', 4, 4)`` matrices: what RANSAC and the consensus hand
+    on for verification. Distinct as :func:`distinct` says, ``centre`` moved more than
+    :data:`DISTINCT_SHIFT` times the step's inlier distance ``threshold`` apart."""
+    pool = np.tile(np.eye(4), (len(rotations), 1, 1))
+    pool[:, :3, :3], pool[:, :3, 3] = rotations, shifts
+    return pool[distinct(pool, k, centre, DISTINCT_SHIFT * threshold)]
 
 
 def overlap_score(

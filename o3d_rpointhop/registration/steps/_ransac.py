@@ -26,7 +26,7 @@ from ..._utils.cells import CellGrid
 from ..._utils.compiled import kernel
 from ...transforms import from_centred, rigid_transform, rigid_transforms
 from ._edges import consistent_edges
-from ._hypotheses import DISTINCT_SHIFT, distinct
+from ._hypotheses import pick_distinct
 from ._refit import refit_while_growing
 
 __all__ = ["RansacResult", "ransac"]
@@ -255,12 +255,11 @@ def ransac(
     transformation = np.eye(4)
     hypotheses = np.empty((0, 4, 4))
     if len(pool_count):
-        pool = np.tile(np.eye(4), (len(pool_rot), 1, 1))
-        pool[:, :3, :3], pool[:, :3, 3] = pool_rot, pool_shift
         if clouds is not None:
             grid = CellGrid(clouds[1], threshold)
-            pool = pool[_verify(pool_rot, pool_shift, clouds, grid)]
-        picked = pool[distinct(pool, n_hypotheses, source.mean(axis=0), DISTINCT_SHIFT * threshold)]
+            order = _verify(pool_rot, pool_shift, clouds, grid)
+            pool_rot, pool_shift = pool_rot[order], pool_shift[order]
+        picked = pick_distinct(pool_rot, pool_shift, n_hypotheses, source.mean(axis=0), threshold)
         if clouds is not None:
             hypotheses = np.stack([_refit_on_clouds(t, clouds, grid) for t in picked])
         else:
@@ -274,7 +273,7 @@ def ransac(
         < sq_threshold
     )
     transformation = from_centred(transformation, centre)  # back from the centred frame
-    hypotheses = np.array([from_centred(t, centre) for t in hypotheses]).reshape(-1, 4, 4)
+    hypotheses = from_centred(hypotheses, centre)
     return RansacResult(
         transformation=transformation, inliers=inliers, iterations=drawn, hypotheses=hypotheses
     )
