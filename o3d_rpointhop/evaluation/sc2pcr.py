@@ -299,8 +299,7 @@ class SC2PCRGlobal(ConsensusGlobal):
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         corr = self._matches(context)
-        src = np.asarray(context.global_cloud("source").points)[corr.pairs[:, 0]]
-        tgt = np.asarray(context.global_cloud("target").points)[corr.pairs[:, 1]]
+        src, tgt = self._matched(context, corr)
         found, hypotheses = sc2pcr(
             src,
             tgt,

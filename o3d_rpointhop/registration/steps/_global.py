@@ -58,6 +58,13 @@ class GlobalStep(RegistrationStep):
             context.features(self.descriptor, "target"),
         )
 
+    @staticmethod
+    def _matched(context: RegistrationContext, corr: Correspondences):
+        """The matched points of ``corr`` on the global clouds (centred frame): the
+        source's and the target's, row by row."""
+        src, tgt = (np.asarray(c.points) for c in context.clouds("global"))
+        return src[corr.pairs[:, 0]], tgt[corr.pairs[:, 1]]
+
     def _chosen(
         self,
         context: RegistrationContext,
@@ -74,10 +81,7 @@ class GlobalStep(RegistrationStep):
         gives); else ``estimate``."""
         if len(hypotheses) < 2:
             return estimate, {}
-        src, tgt = (np.asarray(c.points) for c in context.clouds("global"))
-        check = verify(
-            context, hypotheses, distance, (src[corr.pairs[:, 0]], tgt[corr.pairs[:, 1]])
-        )
+        check = verify(context, hypotheses, distance, GlobalStep._matched(context, corr))
         info = {
             "hypothesis_scores": [round(float(s), 6) for s in check.scores],
             "chosen_hypothesis": check.best,
@@ -116,8 +120,7 @@ class GlobalStep(RegistrationStep):
         }
         # The matches themselves, in the caller's coordinates, and which of them the
         # estimate explains (for looking at a result: o3d_rpointhop.viewer).
-        src, tgt = (np.asarray(c.points) for c in context.clouds("global"))
-        a, b = src[corr.pairs[:, 0]], tgt[corr.pairs[:, 1]]
+        a, b = GlobalStep._matched(context, corr)
         moved = a @ transformation[:3, :3].T + transformation[:3, 3]
         check.match_inliers = ((moved - b) ** 2).sum(axis=1) < distance * distance
         if check.info.get("chosen_hypothesis", 0):  # the step's count was of its own choice

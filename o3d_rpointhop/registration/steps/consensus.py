@@ -188,12 +188,9 @@ class ConsensusGlobal(GlobalStep):
         settings = context.settings
         distance = self.max_correspondence_distance or settings.ransac_distance
         corr = self._matches(context)
-        src = np.asarray(context.global_cloud("source").points)
-        tgt = np.asarray(context.global_cloud("target").points)
         first = self.compatibility_distance or settings.consensus_distance
         found = consensus(
-            src[corr.pairs[:, 0]],
-            tgt[corr.pairs[:, 1]],
+            *self._matched(context, corr),
             compatibility_threshold=first,
             inlier_threshold=distance,
             score_threshold=self.score_distance or settings.score_distance,

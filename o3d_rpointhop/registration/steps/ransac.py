@@ -102,18 +102,16 @@ class RANSACGlobal(GlobalStep):
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distance = self.max_correspondence_distance or context.settings.ransac_distance
         corr = self._correspond(context, mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
-        src = np.asarray(context.global_cloud("source").points)
-        tgt = np.asarray(context.global_cloud("target").points)
+        clouds = tuple(np.asarray(c.points) for c in context.clouds("global"))
         found = ransac(
-            src[corr.pairs[:, 0]],
-            tgt[corr.pairs[:, 1]],
+            *self._matched(context, corr),
             distance,
             max_iteration=int(self.max_iteration),
             confidence=float(self.confidence),
             edge_length=float(self.edge_length),
             seed=context.seed,
             ransac_n=int(self.ransac_n),
-            clouds=(src, tgt) if self.selection == "fitness" else None,
+            clouds=clouds if self.selection == "fitness" else None,
             upright=None if context.up is None else context.upright,
             n_hypotheses=int(self.n_hypotheses),
         )

@@ -67,9 +67,7 @@ class SVDGlobal(GlobalStep):
         corr = self._correspond(
             context, mutual_filter=self.mutual_filter, top_k=top_k, top_k_ratio=top_k_ratio
         )
-        src = np.asarray(context.global_cloud("source").points)[corr.pairs[:, 0]]
-        tgt = np.asarray(context.global_cloud("target").points)[corr.pairs[:, 1]]
-        estimate = rigid_transform(src, tgt)
+        estimate = rigid_transform(*self._matched(context, corr))
         distance = context.settings.evaluation_distance
         check = context.evaluate(estimate, distance, which="global")
         return StepResult(
