@@ -149,15 +149,17 @@ def consensus_3_hypotheses():
     return ConsensusGlobal(n_hypotheses=3)
 
 
-def _register_with(**options):
+def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
     ``global_method`` makes a fresh step per pair): it returns the whole result (the
     runner reads its transformation, its flags and, for the records, what its global
-    step saw)."""
+    step saw). ``describe_with``: a factory of the descriptor to use instead of the
+    benchmark's (FPFH), one per pair."""
 
     def run(source, target, descriptor, voxel, seed, viewpoints):
         chosen = _resolved(options)
-        return register(source, target, descriptor, seed=seed, viewpoints=viewpoints, **chosen)
+        used = descriptor if describe_with is None else describe_with()
+        return register(source, target, used, seed=seed, viewpoints=viewpoints, **chosen)
 
     run.options = options  # what the records name (provenance)
     return run
@@ -181,16 +183,7 @@ def _run_fpfh_fgr(source, target, descriptor, voxel, seed, viewpoints):
 def _fpfh_pipeline(**options):
     """FPFH through :func:`~o3d_rpointhop.register` (a callable ``global_method`` makes
     a fresh step per pair)."""
-
-    def run(source, target, descriptor, voxel, seed, viewpoints):
-        chosen = _resolved(options)
-        result = register(
-            source, target, FPFHTransformer(), seed=seed, viewpoints=viewpoints, **chosen
-        )
-        return result
-
-    run.options = options
-    return run
+    return _register_with(FPFHTransformer, **options)
 
 
 def _kiss_matcher(source, target, descriptor, voxel, seed, viewpoints):
