@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from .compiled import kernel
 
-__all__ = ["CellGrid"]
+__all__ = ["CellGrid", "nearest_one"]
 
 #: Most cells a grid allocates (an int64 start per cell: 32 MiB at most); clouds wider
 #: than that, relative to the radius, are searched with a k-d tree instead.
@@ -28,39 +28,56 @@ MAX_CELLS = 1 << 22
 _WIDEN = 1.0 + 1e-9
 
 
+@kernel(inline="always")
+def nearest_one(qx, qy, qz, points, starts, lo, inv_cell, dims, sq_radius):  # pragma: no cover
+    """The squared distance to and row of the nearest of ``points`` (sorted by cell,
+    ``starts`` the first row of every cell in C order over ``dims`` and one past the
+    last) strictly closer than ``sq_radius`` to the query ``(qx, qy, qz)``; ``-1`` for
+    none. A helper for kernels that search one point at a time."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    fx = np.floor((qx - lo[0]) * inv_cell)
+    fy = np.floor((qy - lo[1]) * inv_cell)
+    fz = np.floor((qz - lo[2]) * inv_cell)
+    best = sq_radius
+    found = -1
+    if not (-1.0 <= fx <= nx and -1.0 <= fy <= ny and -1.0 <= fz <= nz):
+        return best, found  # far outside the grid (or not a number)
+    cx, cy, cz = int(fx), int(fy), int(fz)
+    for x in range(max(cx - 1, 0), min(cx + 2, nx)):
+        for y in range(max(cy - 1, 0), min(cy + 2, ny)):
+            row = (x * ny + y) * nz
+            for j in range(starts[row + max(cz - 1, 0)], starts[row + min(cz + 2, nz)]):
+                dx = qx - points[j, 0]
+                dy = qy - points[j, 1]
+                dz = qz - points[j, 2]
+                d = (dx * dx + dy * dy) + dz * dz
+                if d < best:
+                    best = d
+                    found = j
+    return best, found
+
+
 @kernel()
 def _nearest_in_cells(
     queries, points, starts, lo, inv_cell, dims, sq_radius
 ):  # pragma: no cover - compiled
     """Distance to and row of each query's nearest point closer than the radius
-    (``inf`` and ``len(points)`` for none); ``points`` sorted by cell, ``starts`` the
-    first row of every cell (C order over ``dims``) and one past the last."""
+    (``inf`` and ``len(points)`` for none), by :func:`nearest_one`."""
     n = queries.shape[0]
     dist = np.full(n, np.inf)
     index = np.full(n, points.shape[0], dtype=np.int64)
-    nx, ny, nz = dims[0], dims[1], dims[2]
     for i in range(n):
-        qx, qy, qz = queries[i, 0], queries[i, 1], queries[i, 2]
-        fx = np.floor((qx - lo[0]) * inv_cell)
-        fy = np.floor((qy - lo[1]) * inv_cell)
-        fz = np.floor((qz - lo[2]) * inv_cell)
-        inside = -1.0 <= fx <= nx and -1.0 <= fy <= ny and -1.0 <= fz <= nz
-        if not inside:  # far outside the grid (or not a number)
-            continue
-        cx, cy, cz = int(fx), int(fy), int(fz)
-        best = sq_radius
-        found = -1
-        for x in range(max(cx - 1, 0), min(cx + 2, nx)):
-            for y in range(max(cy - 1, 0), min(cy + 2, ny)):
-                row = (x * ny + y) * nz
-                for j in range(starts[row + max(cz - 1, 0)], starts[row + min(cz + 2, nz)]):
-                    dx = qx - points[j, 0]
-                    dy = qy - points[j, 1]
-                    dz = qz - points[j, 2]
-                    d = (dx * dx + dy * dy) + dz * dz
-                    if d < best:
-                        best = d
-                        found = j
+        best, found = nearest_one(
+            queries[i, 0],
+            queries[i, 1],
+            queries[i, 2],
+            points,
+            starts,
+            lo,
+            inv_cell,
+            dims,
+            sq_radius,
+        )
         if found >= 0:
             dist[i] = np.sqrt(best)
             index[i] = found
@@ -104,6 +121,33 @@ class CellGrid:
         self._inv_cell = inv_cell
         self._dims = dims
 
+    @property
+    def on_cells(self) -> bool:
+        """Whether the grid was built (False: too wide for :data:`MAX_CELLS`, searched
+        with a k-d tree)."""
+        return self._tree is None
+
+    def kernel_arguments(self) -> tuple:
+        """What a kernel passes :func:`nearest_one` after the query: the points sorted
+        by cell, the cells' starts, the grid's corner, inverse cell width, dimensions
+        and the squared radius. Rows it finds index :attr:`order` (the sorted row's
+        original row). Only for a grid :attr:`on_cells`."""
+        if self._tree is not None:
+            raise ValueError("the points are searched with a k-d tree, not on cells")
+        return (
+            self._sorted,
+            self._starts,
+            self._lo,
+            self._inv_cell,
+            self._dims,
+            self.radius * self.radius,
+        )
+
+    @property
+    def order(self) -> np.ndarray:
+        """The original row of every sorted row (a grid :attr:`on_cells`)."""
+        return self._order
+
     def nearest(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance to and index of every query's nearest point closer than the radius.
 
@@ -122,15 +166,7 @@ class CellGrid:
         if self._tree is not None:
             dist, index = self._tree.query(queries, distance_upper_bound=self.radius, workers=-1)
             return dist, index.astype(np.int64, copy=False)
-        dist, found = _nearest_in_cells(
-            queries,
-            self._sorted,
-            self._starts,
-            self._lo,
-            self._inv_cell,
-            self._dims,
-            self.radius * self.radius,
-        )
+        dist, found = _nearest_in_cells(queries, *self.kernel_arguments())
         index = np.full(len(queries), self.n_points, dtype=np.int64)
         hit = found < self.n_points
         index[hit] = self._order[found[hit]]

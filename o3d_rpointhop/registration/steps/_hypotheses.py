@@ -16,8 +16,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from ..._utils.cells import CellGrid
+from ._trial_icp import refine_point_to_plane
 from .icp import PointToPlaneICP
 
 __all__ = [
@@ -110,7 +111,7 @@ def overlap_score(
     transformation: np.ndarray,
     distance: float,
     normals: tuple[np.ndarray, np.ndarray] | None = None,
-    target_tree: cKDTree | None = None,
+    grids: tuple[CellGrid, CellGrid] | None = None,
 ) -> float:
     """How well ``transformation`` brings the two clouds together where they can meet:
     every source point within ``distance`` of the target, and every target point within
@@ -118,21 +119,28 @@ def overlap_score(
     (r / distance)^2`` of its distance ``r`` (with ``normals``, only where the two
     points' normals agree within :data:`NORMAL_ANGLE_DEG`, either sign: surfaces that
     cross are not an overlap); the sum over both clouds, divided by the smaller cloud's
-    size (the most points the overlap can hold on one side). ``target_tree``: a
-    ``cKDTree`` of ``target``, built once for many transformations."""
-    rot = transformation[:3, :3]
-    moved = source @ rot.T + transformation[:3, 3]
+    size (the most points the overlap can hold on one side). ``grids``: the
+    :class:`~o3d_rpointhop._utils.cells.CellGrid` of ``source`` and of ``target`` with
+    radius ``distance``, built once for many transformations (the target is moved back
+    onto the source for the second direction: distances are the same)."""
+    if grids is None:
+        grids = (CellGrid(source, distance), CellGrid(target, distance))
+    rot, shift = transformation[:3, :3], transformation[:3, 3]
+    # Each side's queries in the other cloud's frame, and the rotation between them.
+    sides = (
+        (source @ rot.T + shift, grids[1], rot),
+        ((target - shift) @ rot, grids[0], rot.T),
+    )
     total = 0.0
     cos = np.cos(np.radians(NORMAL_ANGLE_DEG))
-    turned = None if normals is None else (normals[0] @ rot.T, normals[1])
-    trees = (cKDTree(target) if target_tree is None else target_tree, cKDTree(moved))
-    for side, a in enumerate((moved, target)):
-        r, idx = trees[side].query(a, distance_upper_bound=distance)
+    for side, (queries, grid, turn) in enumerate(sides):
+        r, idx = grid.nearest(queries)
         inside = np.isfinite(r)
         weight = 1.0 - (r[inside] / distance) ** 2
-        if turned is not None:
-            na, nb = turned[side], turned[1 - side]
-            agree = np.abs(np.einsum("ij,ij->i", na[inside], nb[idx[inside]])) >= cos
+        if normals is not None:
+            own, other = normals[side], normals[1 - side]
+            turned = own[inside] @ turn.T
+            agree = np.abs(np.einsum("ij,ij->i", turned, other[idx[inside]])) >= cos
             weight = weight[agree]
         total += float(np.sum(weight))
     return total / min(len(source), len(target))
@@ -174,24 +182,27 @@ def verify(
     Verification
     """
     coarse = context.coarse()
-    icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
     source = np.asarray(coarse.source.points)
     target = np.asarray(coarse.target.points)
     radius = context.settings.normal_radius
-    # The keys point-to-plane ICP caches the coarse clouds' normals under: estimated once.
+    # Under the keys point-to-plane ICP caches the coarse clouds' normals: estimated once.
     normals = tuple(
         np.asarray(coarse.with_normals(cloud, f"{which}-full", radius).normals)
         for cloud, which in ((coarse.source, "source"), (coarse.target, "target"))
     )
-    tree = cKDTree(target)
-
-    def score(t):
-        return overlap_score(source, target, t, distance, normals, tree) * match_support(
-            matched, t, distance
-        )
-
-    refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
-    scores = np.array([score(t) for t in refined])
+    grids = (CellGrid(source, distance), CellGrid(target, distance))
+    if grids[1].on_cells:
+        refined = refine_point_to_plane(source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS)
+    else:  # a cloud too wide for a grid at this distance: Open3D's ICP
+        icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
+        refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
+    scores = np.array(
+        [
+            overlap_score(source, target, t, distance, normals, grids)
+            * match_support(matched, t, distance)
+            for t in refined
+        ]
+    )
     best = int(np.argmax(scores))
     if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
         best = 0

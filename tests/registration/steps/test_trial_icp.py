@@ -1,0 +1,90 @@
+"""The compiled trial ICP takes Open3D's point-to-plane steps."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+import pytest
+from scipy.spatial.transform import Rotation
+
+from o3d_rpointhop._utils import cells
+from o3d_rpointhop._utils.cells import CellGrid
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.registration.steps._trial_icp import refine_point_to_plane
+
+reg = o3d.pipelines.registration
+
+
+def _pair(seed=0):
+    rng = np.random.default_rng(seed)
+    points = make_object(1500, shape_seed=seed, sample_seed=seed)
+    source = points[rng.permutation(len(points))[:900]]
+    target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.15, max_nn=30))
+    return source, target
+
+
+def _starts(truth, n, seed):
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        step = np.eye(4)
+        step[:3, :3] = Rotation.from_rotvec(rng.normal(scale=0.08, size=3)).as_matrix()
+        step[:3, 3] = rng.normal(scale=0.02, size=3)
+        out.append(step @ truth)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("iterations", [1, 4, 15])
+def test_same_poses_as_open3d_point_to_plane(iterations):
+    source, target = _pair()
+    starts = _starts(np.eye(4), 4, seed=iterations)
+    distance = 0.08
+    expected = np.array(
+        [
+            reg.registration_icp(
+                o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source)),
+                target,
+                distance,
+                start,
+                reg.TransformationEstimationPointToPlane(),
+                reg.ICPConvergenceCriteria(max_iteration=iterations),
+            ).transformation
+            for start in starts
+        ]
+    )
+    grid = CellGrid(np.asarray(target.points), distance)
+    refined = refine_point_to_plane(source, grid, np.asarray(target.normals), starts, iterations)
+    np.testing.assert_allclose(refined, expected, atol=1e-9)
+    # and it moved: the starts were off
+    assert np.abs(refined - starts).max() > 1e-3
+
+
+def test_refines_towards_the_truth_and_keeps_input_order():
+    source, target = _pair(1)
+    starts = _starts(np.eye(4), 3, seed=5)
+    grid = CellGrid(np.asarray(target.points), 0.1)
+    refined = refine_point_to_plane(source, grid, np.asarray(target.normals), starts, 30)
+    before = np.linalg.norm(starts[:, :3, 3], axis=1)
+    after = np.linalg.norm(refined[:, :3, 3], axis=1)
+    assert np.all(after < before)
+    assert np.all(after < 5e-3)
+    one = refine_point_to_plane(source, grid, np.asarray(target.normals), starts[1:2], 30)
+    np.testing.assert_array_equal(one[0], refined[1])
+
+
+def test_a_pose_without_correspondences_stays():
+    source, target = _pair(2)
+    far = np.eye(4)[None].copy()
+    far[0, :3, 3] = 50.0  # no target point within the distance of any moved point
+    grid = CellGrid(np.asarray(target.points), 0.05)
+    refined = refine_point_to_plane(source, grid, np.asarray(target.normals), far, 10)
+    np.testing.assert_array_equal(refined, far)
+
+
+def test_a_grid_searched_by_a_tree_has_no_kernel_arguments(monkeypatch):
+    monkeypatch.setattr(cells, "MAX_CELLS", 8)
+    grid = CellGrid(np.random.default_rng(0).uniform(0, 10, (100, 3)), 0.1)
+    assert not grid.on_cells
+    with pytest.raises(ValueError, match="k-d tree"):
+        grid.kernel_arguments()
