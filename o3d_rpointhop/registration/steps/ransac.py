@@ -86,7 +86,7 @@ class RANSACGlobal(GlobalStep):
         ransac_n: int = 3,
         edge_length: float = 0.9,
         selection: str = "fitness",
-        n_hypotheses: int = 3,
+        n_hypotheses: int = 1,
     ) -> None:
         self.descriptor = descriptor
         self.max_correspondence_distance = max_correspondence_distance
@@ -132,5 +132,5 @@ class RANSACGlobal(GlobalStep):
 
 if RANSACGlobal.__doc__:  # None under python -OO
     RANSACGlobal.__doc__ = RANSACGlobal.__doc__.replace(
-        "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=3)
+        "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
     )
