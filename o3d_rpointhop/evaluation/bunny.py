@@ -17,10 +17,16 @@ from ._common import (
     register_resolution,
 )
 from .methods import check_methods
+from .metrics import overlap_share
 from .provenance import run_provenance
 from .records import as_rows
 
-__all__ = ["BUNNY_PROTOCOLS", "run_bunny"]
+__all__ = ["BUNNY_PROTOCOLS", "OVERLAP_DISTANCE", "run_bunny"]
+
+#: Two scans' points within this distance (about four point spacings of the Stanford
+#: scans) count as the same surface: a scan's overlap with bun000 is the share of its
+#: points that the true pose brings this close to bun000's.
+OVERLAP_DISTANCE = 0.002
 
 BUNNY_PROTOCOLS = {
     "scans": "real range scans registered to bun000, ground truth from bun.conf",
@@ -41,7 +47,9 @@ def run_bunny(
 ) -> dict:
     """Stanford Bunny: real scan pairs with ``bun.conf`` poses, and the paper's protocol.
 
-    ``"scans"``: every other scan registered to ``bun000`` (success: < 2 deg, < 2 mm).
+    ``"scans"``: every other scan registered to ``bun000`` (success: < 2 deg, < 2 mm),
+    with each scan's overlap with ``bun000`` (:func:`~.metrics.overlap_share` at
+    :data:`OVERLAP_DISTANCE`) under ``"overlap"``.
     ``"paper"``: each scan against a differently sampled copy of itself (2048 random
     points each) moved by Euler angles in [0, 45] deg and a translation in
     [-0.5, 0.5] m, as in the paper (success: < 5 deg, < 5 mm).
@@ -71,6 +79,10 @@ def run_bunny(
                 if name != "bun000"
             ]
             tol = (2.0, 0.002)
+            overlap = {
+                p.name: round(overlap_share(p.source, p.target, p.truth, OVERLAP_DISTANCE), 3)
+                for p in pairs
+            }
         elif protocol == "paper":
             pairs = []
             for name, s in scans.items():
@@ -82,6 +94,7 @@ def run_bunny(
                 truth[:3, :3], truth[:3, 3] = rot.T, -rot.T @ shift
                 pairs.append(Pair(truth_src @ rot.T + shift, target, truth, truth_src, name))
             tol = (5.0, 0.005)
+            overlap = None
         else:
             raise ValueError(f"unknown bunny protocol {protocol!r}; choose 'scans' or 'paper'")
         bar = Progress(len(methods) * len(pairs), f"bunny {protocol}", progress)
@@ -94,4 +107,6 @@ def run_bunny(
             "summary": summaries,
             "records": as_rows(records),
         }
+        if overlap is not None:
+            out["protocols"][protocol]["overlap"] = overlap
     return out

@@ -9,6 +9,7 @@ import pytest
 from o3d_rpointhop.evaluation.metrics import (
     is_symmetry,
     mcnemar,
+    overlap_share,
     pair_errors,
     rmse_3dmatch,
     summarize,
@@ -251,3 +252,15 @@ def test_summarize_gives_rpmnet_s_means_and_chamfer_by_hand():
     assert out["chamfer"] == pytest.approx(0.003)
     plain = summarize([record(1.0, 0.01, None), record(3.0, 0.03, 0.004)])
     assert not {"mean_rotation_error_deg", "mean_translation_error", "chamfer"} & set(plain)
+
+
+def test_overlap_share_counts_the_source_points_the_truth_brings_near_the_target():
+    grid = np.stack(np.meshgrid(np.arange(10.0), np.arange(10.0), [0.0]), -1).reshape(-1, 3)
+    target = grid[grid[:, 0] < 6]  # columns 0-5 of the plane
+    source = grid[grid[:, 0] >= 2] + [0.0, 0.0, 5.0]  # columns 2-9, lifted by 5
+    truth = np.eye(4)
+    truth[2, 3] = -5.0  # puts the source back on the plane: columns 2-5 are shared
+    assert overlap_share(source, target, truth, 0.1) == pytest.approx(4 / 8)
+    assert overlap_share(source, target, np.eye(4), 0.1) == 0.0  # lifted: nothing near
+    # a point exactly at the distance is not within it
+    assert overlap_share(np.zeros((1, 3)), np.array([[0.1, 0.0, 0.0]]), np.eye(4), 0.1) == 0.0
