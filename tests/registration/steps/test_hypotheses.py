@@ -184,3 +184,37 @@ def test_distinct_keeps_the_best_of_each_pose():
 def test_n_hypotheses_is_checked():
     with pytest.raises(ValueError, match="n_hypotheses"):
         RANSACGlobal(n_hypotheses=0)._validate_all()
+
+
+def test_overlap_score_turns_the_normals_with_the_pose():
+    """Under a turning pose each side's normals are compared in one frame: a turned
+    copy of a plane, with its own turned normals, overlaps fully once turned back, and
+    not at all with normals that stayed put."""
+    grid = np.stack(np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11)), -1).reshape(-1, 2)
+    plane = np.c_[grid, np.zeros(len(grid))]
+    up = np.tile([0.0, 0.0, 1.0], (len(plane), 1))
+    turn = Rotation.from_euler("xyz", [70, -40, 25], degrees=True).as_matrix()
+    source = plane @ turn.T + [0.3, -0.2, 0.5]
+    back = np.eye(4)  # maps the turned copy onto the plane
+    back[:3, :3] = turn.T
+    back[:3, 3] = -turn.T @ [0.3, -0.2, 0.5]
+    assert overlap_score(source, plane, back, 0.05, (up @ turn.T, up)) == pytest.approx(2.0)
+    assert overlap_score(source, plane, back, 0.05, (up, up)) == pytest.approx(0.0)
+
+
+def test_verify_on_clouds_too_wide_for_a_grid_uses_open3d_icp(monkeypatch):
+    """A cloud too wide for a cell grid at the verification's distance is refined by
+    Open3D's ICP and scored through k-d trees: the same choice and nearly the same
+    poses as on the grid."""
+    from o3d_rpointhop._utils import cells
+
+    source, target, truth, wrong, _, (si, ti) = _planted_pair()
+    context = RegistrationContext(source, target)
+    matched = (source[si] - context.origin, target[ti] - context.origin)
+    local = np.stack([context.to_local(wrong), context.to_local(truth)])
+    on_grid = verify(context, local, 0.05, matched)
+    monkeypatch.setattr(cells, "MAX_CELLS", 1)
+    on_trees = verify(RegistrationContext(source, target), local, 0.05, matched)
+    assert on_trees.best == on_grid.best == 1
+    np.testing.assert_allclose(on_trees.refined, on_grid.refined, atol=1e-6)
+    np.testing.assert_allclose(on_trees.scores, on_grid.scores, rtol=1e-6)
