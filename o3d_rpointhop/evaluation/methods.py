@@ -154,6 +154,12 @@ def consensus_3_hypotheses():
     return ConsensusGlobal(n_hypotheses=3)
 
 
+def consensus_salient():
+    """The consensus on the matches between salient points (the 75 % most distinct of
+    each cloud)."""
+    return ConsensusGlobal(salient_share=0.75)
+
+
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
     ``global_method`` makes a fresh step per pair): it returns the whole result (the
@@ -265,6 +271,14 @@ METHODS = _methods(
         model="scene",
     ),
     Method(
+        "rpointhop-scene-salient",
+        "R-PointHop, shipped scene model, consensus on matches between salient points "
+        "(salient_share=0.75) + point-to-plane ICP",
+        _register_with(global_method=consensus_salient),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-up",
         "R-PointHop, shipped scene model, register() defaults, up-axis prior (camera -y)",
         _register_with(up=CAMERA_UP),
@@ -358,6 +372,15 @@ METHODS = _methods(
         "FPFH through this library's consensus + ICP",
         _fpfh_pipeline(global_method="consensus"),
         default_on=_ALL,
+        model=None,
+        descriptor="fpfh",
+    ),
+    Method(
+        "fpfh-pipeline-consensus-salient-icp",
+        "FPFH through this library's consensus on matches between salient points "
+        "(salient_share=0.75) + ICP",
+        _fpfh_pipeline(global_method=consensus_salient),
+        datasets=_SCENES,
         model=None,
         descriptor="fpfh",
     ),

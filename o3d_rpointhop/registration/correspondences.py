@@ -12,7 +12,20 @@ import open3d as o3d
 from .._utils.compiled import kernel
 from .._utils.params import Interval, validate_params
 
-__all__ = ["Correspondences", "count_of", "find_correspondences", "nearest_descriptors"]
+__all__ = [
+    "SALIENT_NEIGHBOURS",
+    "Correspondences",
+    "count_of",
+    "distinctiveness",
+    "find_correspondences",
+    "nearest_descriptors",
+    "salient",
+]
+
+#: The neighbour whose descriptor distance measures a point's distinctiveness: a point
+#: whose descriptor has ten near twins in its own cloud (a wall, a floor, a table top)
+#: says little about where it is.
+SALIENT_NEIGHBOURS = 10
 
 # Rows of the distance matrix computed at a time (bounded memory for large clouds).
 _CHUNK_ELEMENTS = 2**23
@@ -267,3 +280,41 @@ def find_correspondences(
         distances=d1[chosen],
         ratios=ratio[chosen],
     )
+
+
+def distinctiveness(features: np.ndarray, k: int = SALIENT_NEIGHBOURS) -> np.ndarray:
+    """How distinct each row of ``features`` is within its own set: the distance to its
+    ``k``-th nearest other row (exact, :func:`nearest_descriptors`). Points of flat,
+    repeated regions have many near twins and score low.
+
+    Parameters
+    ----------
+    features : array-like of shape (n, d)
+    k : int, default=SALIENT_NEIGHBOURS
+        Capped at ``n - 1``.
+
+    Returns
+    -------
+    ndarray of shape (n,)
+    """
+    features = _as_features(features, "features")
+    k = max(1, min(int(k), len(features) - 1))
+    _, dist = nearest_descriptors(features, features, k=k + 1)  # the row itself first
+    return dist[:, -1]
+
+
+def salient(features: np.ndarray, share: float, k: int = SALIENT_NEIGHBOURS) -> np.ndarray:
+    """Which rows are among the ``share`` (in (0, 1]) most distinct of ``features``
+    (:func:`distinctiveness`; ties broken by row order, so exactly
+    ``ceil(share * n)`` rows are kept).
+
+    Returns
+    -------
+    ndarray of shape (n,), bool
+    """
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f"share must be in (0, 1], got {share}")
+    score = distinctiveness(features, k)
+    keep = np.zeros(len(score), dtype=bool)
+    keep[np.argsort(-score, kind="stable")[: int(np.ceil(share * len(score)))]] = True
+    return keep

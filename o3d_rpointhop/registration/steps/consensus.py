@@ -11,7 +11,7 @@ import numpy as np
 from ..._utils.params import Interval, StrOptions
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
-from ..correspondences import Correspondences, find_correspondences
+from ..correspondences import Correspondences, find_correspondences, salient
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
@@ -60,6 +60,14 @@ class ConsensusGlobal(GlobalStep):
         ``mutual_filter``, where both directions agree by definition).
     max_ratio : float, default=None
         Ratio-test threshold on the matches.
+    salient_share : float, default=None
+        Keep only the matches between two salient points: each among this share (in
+        (0, 1]) of its cloud's points whose descriptors are the most distinct within
+        the cloud (the distance to the 10th nearest descriptor of the same cloud,
+        :func:`~o3d_rpointhop.registration.correspondences.distinctiveness`). Walls,
+        floors and table tops, whose descriptors repeat, then stop drowning the few
+        right matches of a pair that overlaps little. ``None``: every match
+        (docs/registration.md, "Pairs that overlap little").
     max_matches : int, default=8000
         Most matches the graph is built on; its two bit matrices take ``max_matches**2 /
         4`` bytes (16 MB at 8000).
@@ -108,6 +116,7 @@ class ConsensusGlobal(GlobalStep):
         "mutual_filter": ["boolean"],
         "both_directions": ["boolean"],
         "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
+        "salient_share": [None, Interval(Real, 0, 1, closed="right")],
         "max_matches": [Interval(Integral, 3, None, closed="left")],
         "cap": [StrOptions({"index", "distance"})],
         "score_distance": OPTIONAL_DISTANCE,
@@ -131,6 +140,7 @@ class ConsensusGlobal(GlobalStep):
         mutual_filter: bool = False,
         both_directions: bool = True,
         max_ratio: float | None = None,
+        salient_share: float | None = None,
         max_matches: int = 8000,
         cap: str = "index",
         score_distance: float | None = None,
@@ -150,6 +160,7 @@ class ConsensusGlobal(GlobalStep):
         self.mutual_filter = mutual_filter
         self.both_directions = both_directions
         self.max_ratio = max_ratio
+        self.salient_share = salient_share
         self.max_matches = max_matches
         self.cap = cap
         self.score_distance = score_distance
@@ -176,6 +187,8 @@ class ConsensusGlobal(GlobalStep):
             _, first = np.unique(pairs, axis=0, return_index=True)
             first = np.sort(first)
             corr = Correspondences(pairs[first], distances[first], ratios[first])
+        if self.salient_share is not None:
+            corr = self._between_salient(context, corr)
         if len(corr) > self.max_matches:
             if self.cap == "distance":
                 keep = np.sort(np.argsort(corr.distances, kind="stable")[: self.max_matches])
@@ -183,6 +196,19 @@ class ConsensusGlobal(GlobalStep):
                 keep = np.unique(np.linspace(0, len(corr) - 1, self.max_matches).astype(np.int64))
             corr = Correspondences(corr.pairs[keep], corr.distances[keep], corr.ratios[keep])
         return corr
+
+    def _between_salient(self, context: RegistrationContext, corr: Correspondences):
+        """The matches whose two points are both among the ``salient_share`` most
+        distinct of their cloud (:func:`~o3d_rpointhop.registration.correspondences.salient`)."""
+        src, tgt = self._describe(context)
+        share = float(self.salient_share)
+        keep = salient(src, share)[corr.pairs[:, 0]] & salient(tgt, share)[corr.pairs[:, 1]]
+        if keep.sum() < 3:
+            raise ValueError(
+                f"{type(self).__name__}: only {int(keep.sum())} matches join two salient "
+                f"points (salient_share={share}); at least 3 are needed"
+            )
+        return Correspondences(corr.pairs[keep], corr.distances[keep], corr.ratios[keep])
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         settings = context.settings

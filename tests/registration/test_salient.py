@@ -1,0 +1,91 @@
+"""Matches between salient points: a repeated region's matches are dropped."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from o3d_rpointhop import ConsensusGlobal, RegistrationPipeline, RegistrationWarning
+from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.registration.correspondences import distinctiveness, salient
+from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
+
+
+def test_salient_keeps_the_distinct_rows_and_the_share_asked_for():
+    rng = np.random.default_rng(0)
+    repeated = np.tile([1.0, 0.0, 0.0, 0.0], (60, 1)) + rng.normal(0, 1e-3, (60, 4))
+    distinct = rng.normal(0, 1, (40, 4))
+    features = np.r_[repeated, distinct]
+    score = distinctiveness(features)
+    assert score[:60].max() < score[60:].min()
+    keep = salient(features, 0.4)
+    assert keep.sum() == 40 and keep[60:].all()
+    assert salient(features, 0.333).sum() == 34  # ceil(0.333 * 100)
+    assert salient(features, 1.0).all()
+    with pytest.raises(ValueError, match="share"):
+        salient(features, 0.0)
+
+
+class _Codes:
+    """A descriptor of fixed codes, told apart by the cloud's size."""
+
+    def __init__(self, codes):
+        self.codes = codes
+
+    def transform(self, X):
+        return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
+
+
+def _pair_with_a_floor():
+    """An object standing on a floor, seen twice. The object's points carry codes
+    shared with their true partners; the floor's points all carry nearly one code, so
+    each of their nearest descriptors is an arbitrary floor point of the other cloud."""
+    rng = np.random.default_rng(1)
+    thing = make_object(300, shape_seed=4, sample_seed=0) * 0.3 + [0.0, 0.0, 0.5]
+    floor = np.c_[rng.uniform(-2, 2, (700, 2)), np.zeros(700)]
+    target = np.r_[thing, floor]
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_euler("zyx", [40, 10, -5], degrees=True).as_matrix()
+    truth[:3, 3] = [0.3, -0.2, 0.1]
+    keep = rng.permutation(len(target))[:900]  # the source: 900 of the same points
+    source = apply_transform(target[keep], np.linalg.inv(truth))
+    dim = 8
+    tgt_codes = np.r_[rng.normal(0, 1, (300, dim)), np.ones((700, dim)) * 5.0]
+    tgt_codes[300:] += rng.normal(0, 1e-3, (700, dim))
+    src_codes = tgt_codes[keep] + rng.normal(0, 1e-6, (900, dim))
+    src_codes[keep >= 300] = 5.0 + rng.normal(0, 1e-3, ((keep >= 300).sum(), dim))
+    return source, target, truth, _Codes({900: src_codes, 1000: tgt_codes})
+
+
+def _run(step, source, target, descriptor):
+    pipe = RegistrationPipeline([("global", step)], descriptor=descriptor)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RegistrationWarning)
+        return pipe.register(source, target)
+
+
+def test_the_floors_matches_are_dropped_and_the_pose_found():
+    source, target, truth, descriptor = _pair_with_a_floor()
+    every = _run(ConsensusGlobal(), source, target, descriptor).steps[0]
+    only = _run(ConsensusGlobal(salient_share=0.3), source, target, descriptor)
+    step = only.steps[0]
+    assert step.info["candidate_matches"] < every.info["candidate_matches"]
+    # What is left is the object's matches, right under the truth.
+    moved = apply_transform(step.matches[:, 0], truth)
+    right = np.linalg.norm(moved - step.matches[:, 1], axis=1) < 1e-6
+    assert right.mean() > 0.9
+    every_right = (
+        np.linalg.norm(apply_transform(every.matches[:, 0], truth) - every.matches[:, 1], axis=1)
+        < 1e-6
+    )
+    assert right.mean() > every_right.mean() + 0.3
+    assert rotation_error_deg(only.transformation, truth) < 1.0
+
+
+def test_too_few_salient_matches_is_a_clear_error():
+    source, target, _, descriptor = _pair_with_a_floor()
+    with pytest.raises(ValueError, match="salient"):
+        _run(ConsensusGlobal(salient_share=0.001), source, target, descriptor)
