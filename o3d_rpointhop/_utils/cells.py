@@ -146,6 +146,8 @@ class CellGrid:
     @property
     def order(self) -> np.ndarray:
         """The original row of every sorted row (a grid :attr:`on_cells`)."""
+        if self._tree is not None:
+            raise ValueError("the points are searched with a k-d tree, not on cells")
         return self._order
 
     def nearest(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

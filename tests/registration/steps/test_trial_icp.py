@@ -88,3 +88,5 @@ def test_a_grid_searched_by_a_tree_has_no_kernel_arguments(monkeypatch):
     assert not grid.on_cells
     with pytest.raises(ValueError, match="k-d tree"):
         grid.kernel_arguments()
+    with pytest.raises(ValueError, match="k-d tree"):
+        _ = grid.order
