@@ -38,9 +38,7 @@ def _scores(seen: dict, truth: np.ndarray) -> tuple[float, float]:
     """The verification's score of the truth (refined as a hypothesis is) and of the
     chosen hypothesis, in the frame the step worked in."""
     context = seen["context"]
-    centred = truth.copy()  # the truth in the centred frame: both clouds shifted alike
-    centred[:3, 3] = truth[:3, :3] @ context.origin + truth[:3, 3] - context.origin
-    stack = np.concatenate([seen["hypotheses"], centred[None]])
+    stack = np.concatenate([seen["hypotheses"], context.to_local(truth)[None]])
     check = _hypotheses.verify(context, stack, seen["distance"], seen["matched"])
     return float(check.scores[-1]), float(check.scores[seen["chosen"]])
 

@@ -144,11 +144,6 @@ def ransac_3_hypotheses():
     return RANSACGlobal(n_hypotheses=3)
 
 
-def ransac_unverified():
-    """RANSAC keeping its own choice, nothing verified (the default before verification)."""
-    return RANSACGlobal(n_hypotheses=1)
-
-
 def consensus_3_hypotheses():
     """The consensus verifying its three best distinct hypotheses by overlap."""
     return ConsensusGlobal(n_hypotheses=3)
@@ -309,12 +304,6 @@ METHODS = _methods(
         "rpointhop-ransac-icp-verified",
         "R-PointHop + RANSAC, three hypotheses verified by overlap + point-to-plane ICP",
         _register_with(global_method=ransac_3_hypotheses),
-        datasets=_OBJECTS,
-    ),
-    Method(
-        "rpointhop-ransac-icp-unverified",
-        "R-PointHop + RANSAC keeping its own choice (n_hypotheses=1) + point-to-plane ICP",
-        _register_with(global_method=ransac_unverified),
         datasets=_OBJECTS,
     ),
     Method(
