@@ -155,6 +155,12 @@ def consensus_salient():
     return ConsensusGlobal(salient_share=0.75)
 
 
+def consensus_salient_3_hypotheses():
+    """The consensus on the matches between salient points, verifying its three best
+    distinct hypotheses by overlap."""
+    return ConsensusGlobal(salient_share=0.75, n_hypotheses=3)
+
+
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
     ``global_method`` makes a fresh step per pair): it returns the whole result (the
@@ -274,6 +280,15 @@ METHODS = _methods(
         model="scene",
     ),
     Method(
+        "rpointhop-scene-salient-verified",
+        "R-PointHop, shipped scene model, consensus on matches between salient points "
+        "(salient_share=0.75) with three hypotheses verified by overlap + point-to-plane "
+        "ICP",
+        _register_with(global_method=consensus_salient_3_hypotheses),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-up",
         "R-PointHop, shipped scene model, register() defaults, up-axis prior (camera -y)",
         _register_with(up=CAMERA_UP),
@@ -369,6 +384,15 @@ METHODS = _methods(
         "FPFH through this library's consensus on matches between salient points "
         "(salient_share=0.75) + ICP",
         _fpfh_pipeline(global_method=consensus_salient),
+        datasets=_SCENES,
+        model=None,
+        descriptor="fpfh",
+    ),
+    Method(
+        "fpfh-pipeline-consensus-salient-verified-icp",
+        "FPFH through this library's consensus on matches between salient points "
+        "(salient_share=0.75) with three hypotheses verified by overlap + ICP",
+        _fpfh_pipeline(global_method=consensus_salient_3_hypotheses),
         datasets=_SCENES,
         model=None,
         descriptor="fpfh",
