@@ -155,6 +155,17 @@ def consensus_salient():
     return ConsensusGlobal(salient_share=0.75)
 
 
+def consensus_salient_2_nearest():
+    """The consensus on the matches between salient points, each point matched to its
+    two nearest descriptors of the other cloud."""
+    return ConsensusGlobal(salient_share=0.75, n_nearest=2)
+
+
+def consensus_salient_2_nearest_12000():
+    """:func:`consensus_salient_2_nearest` on up to 12000 matches."""
+    return ConsensusGlobal(salient_share=0.75, n_nearest=2, max_matches=12000)
+
+
 def consensus_salient_3_hypotheses():
     """The consensus on the matches between salient points, verifying its three best
     distinct hypotheses by overlap."""
@@ -285,6 +296,23 @@ METHODS = _methods(
         "(salient_share=0.75) with three hypotheses verified by overlap + point-to-plane "
         "ICP",
         _register_with(global_method=consensus_salient_3_hypotheses),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-salient-2nearest",
+        "R-PointHop, shipped scene model, consensus on matches between salient points "
+        "(salient_share=0.75), two nearest descriptors per point + point-to-plane ICP",
+        _register_with(global_method=consensus_salient_2_nearest),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-salient-2nearest-12000",
+        "R-PointHop, shipped scene model, consensus on up to 12000 matches between "
+        "salient points (salient_share=0.75), two nearest descriptors per point + "
+        "point-to-plane ICP",
+        _register_with(global_method=consensus_salient_2_nearest_12000),
         datasets=_SCENES,
         model="scene",
     ),

@@ -18,6 +18,7 @@ __all__ = [
     "count_of",
     "distinctiveness",
     "find_correspondences",
+    "k_best_correspondences",
     "nearest_descriptors",
     "salient",
 ]
@@ -279,6 +280,45 @@ def find_correspondences(
         pairs=np.c_[chosen, nearest[chosen]].astype(np.int64),
         distances=d1[chosen],
         ratios=ratio[chosen],
+    )
+
+
+def k_best_correspondences(source_features, target_features, k: int) -> Correspondences:
+    """Match every source point to each of its ``k`` nearest target descriptors (k-best
+    matching): where the right partner is only the second or third nearest, as on a
+    pair that overlaps little, it is still among the matches.
+
+    Parameters
+    ----------
+    source_features, target_features : array-like of shape (n, d) or open3d Feature
+    k : int
+        Matches per source point (at least 1; capped at the target's size). 1 gives the
+        matches of :func:`find_correspondences` without filters.
+
+    Returns
+    -------
+    Correspondences
+        Sorted by source index, then nearest first; each match's ratio is its distance
+        over the next nearest's.
+    """
+    if isinstance(k, bool) or not isinstance(k, Integral) or k < 1:
+        raise ValueError(f"k must be an int >= 1, got {k!r}")
+    src = _as_features(source_features, "source_features")
+    tgt = _as_features(target_features, "target_features")
+    if src.shape[1] != tgt.shape[1]:
+        raise ValueError(
+            f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
+        )
+    k = min(int(k), len(tgt))
+    idx, dist = nearest_descriptors(src, tgt, k=k + 1)
+    if dist.shape[1] == k:  # no next nearest: the last match's ratio is 1
+        dist = np.c_[dist, dist[:, -1:]]
+    d, following = dist[:, :k], dist[:, 1 : k + 1]
+    ratio = np.divide(d, following, out=np.ones_like(d), where=following > 0)
+    return Correspondences(
+        pairs=np.c_[np.repeat(np.arange(len(src)), k), idx[:, :k].ravel()].astype(np.int64),
+        distances=d.ravel(),
+        ratios=ratio.ravel(),
     )
 
 

@@ -11,7 +11,12 @@ import numpy as np
 from ..._utils.params import Interval, StrOptions
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
-from ..correspondences import Correspondences, find_correspondences, salient
+from ..correspondences import (
+    Correspondences,
+    find_correspondences,
+    k_best_correspondences,
+    salient,
+)
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
@@ -60,6 +65,13 @@ class ConsensusGlobal(GlobalStep):
         ``mutual_filter``, where both directions agree by definition).
     max_ratio : float, default=None
         Ratio-test threshold on the matches.
+    n_nearest : int, default=1
+        Matches per point: each point to its ``n_nearest`` nearest descriptors of the
+        other cloud (k-best matching,
+        :func:`~o3d_rpointhop.registration.correspondences.k_best_correspondences`), so
+        a right partner that is only second nearest is still matched. Above 1 it
+        cannot be combined with ``mutual_filter`` or ``max_ratio``, which are defined
+        on the nearest alone.
     salient_share : float, default=None
         Keep only the matches between two salient points: each among this share (in
         (0, 1]) of its cloud's points whose descriptors are the most distinct within
@@ -116,6 +128,7 @@ class ConsensusGlobal(GlobalStep):
         "mutual_filter": ["boolean"],
         "both_directions": ["boolean"],
         "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
+        "n_nearest": [Interval(Integral, 1, None, closed="left")],
         "salient_share": [None, Interval(Real, 0, 1, closed="right")],
         "max_matches": [Interval(Integral, 3, None, closed="left")],
         "cap": [StrOptions({"index", "distance"})],
@@ -140,6 +153,7 @@ class ConsensusGlobal(GlobalStep):
         mutual_filter: bool = False,
         both_directions: bool = True,
         max_ratio: float | None = None,
+        n_nearest: int = 1,
         salient_share: float | None = None,
         max_matches: int = 8000,
         cap: str = "index",
@@ -160,6 +174,7 @@ class ConsensusGlobal(GlobalStep):
         self.mutual_filter = mutual_filter
         self.both_directions = both_directions
         self.max_ratio = max_ratio
+        self.n_nearest = n_nearest
         self.salient_share = salient_share
         self.max_matches = max_matches
         self.cap = cap
@@ -174,13 +189,29 @@ class ConsensusGlobal(GlobalStep):
         self.n_jobs = n_jobs
         self.n_hypotheses = n_hypotheses
 
+    def _check_params(self) -> None:
+        if self.n_nearest > 1 and (self.mutual_filter or self.max_ratio is not None):
+            raise ValueError(
+                f"{type(self).__name__}: n_nearest={self.n_nearest} cannot be combined "
+                "with mutual_filter or max_ratio (both are defined on the nearest "
+                "descriptor alone)"
+            )
+
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
         filters = dict(mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
-        corr = self._correspond(context, **filters)
+        if self.n_nearest > 1:
+            src, tgt = self._describe(context)
+            corr = k_best_correspondences(src, tgt, self.n_nearest)
+        else:
+            corr = self._correspond(context, **filters)
         if self.both_directions and not self.mutual_filter:
             src, tgt = self._describe(context)
-            back = find_correspondences(tgt, src, **filters)
+            back = (
+                k_best_correspondences(tgt, src, self.n_nearest)
+                if self.n_nearest > 1
+                else find_correspondences(tgt, src, **filters)
+            )
             pairs = np.concatenate([corr.pairs, back.pairs[:, ::-1]])
             distances = np.concatenate([corr.distances, back.distances])
             ratios = np.concatenate([corr.ratios, back.ratios])
