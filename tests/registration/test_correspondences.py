@@ -120,3 +120,44 @@ def test_integer_descriptors_are_matched_as_their_float_values():
     got = find_correspondences(ints, ints[::-1])
     want = find_correspondences(ints.astype(np.float64), ints[::-1].astype(np.float64))
     np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+# ----------------------------------------------------------------------------- k-best matches
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_k_best_matches_are_each_points_k_nearest_in_order(k):
+    from scipy.spatial.distance import cdist
+
+    from o3d_rpointhop.registration.correspondences import k_best_correspondences
+
+    rng = np.random.default_rng(k)
+    src, tgt = rng.normal(size=(60, 8)), rng.normal(size=(45, 8))
+    corr = k_best_correspondences(src, tgt, k)
+    exact = cdist(src, tgt)
+    order = np.argsort(exact, axis=1)
+    assert len(corr) == 60 * k
+    np.testing.assert_array_equal(corr.pairs[:, 0], np.repeat(np.arange(60), k))
+    np.testing.assert_array_equal(corr.pairs[:, 1].reshape(60, k), order[:, :k])
+    dist = np.sort(exact, axis=1)
+    np.testing.assert_allclose(corr.distances.reshape(60, k), dist[:, :k], atol=1e-6)
+    np.testing.assert_allclose(
+        corr.ratios.reshape(60, k), dist[:, :k] / dist[:, 1 : k + 1], rtol=1e-6
+    )
+    if k == 1:  # the unfiltered nearest matches, ratios and all
+        plain = find_correspondences(src, tgt)
+        np.testing.assert_array_equal(corr.pairs, plain.pairs)
+        np.testing.assert_allclose(corr.ratios, plain.ratios)
+
+
+def test_k_best_is_capped_at_the_target_and_refuses_a_bad_k():
+    from o3d_rpointhop.registration.correspondences import k_best_correspondences
+
+    rng = np.random.default_rng(0)
+    src, tgt = rng.normal(size=(5, 3)), rng.normal(size=(2, 3))
+    corr = k_best_correspondences(src, tgt, 4)
+    assert len(corr) == 10 and set(corr.pairs[:, 1]) == {0, 1}
+    assert np.all(corr.ratios[1::2] == 1.0)  # the last match has no next nearest
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="k must be"):
+            k_best_correspondences(src, tgt, bad)
+    with pytest.raises(ValueError, match="differ in length"):
+        k_best_correspondences(src, tgt[:, :2], 1)

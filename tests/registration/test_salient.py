@@ -89,3 +89,49 @@ def test_too_few_salient_matches_is_a_clear_error():
     source, target, _, descriptor = _pair_with_a_floor()
     with pytest.raises(ValueError, match="salient"):
         _run(ConsensusGlobal(salient_share=0.001), source, target, descriptor)
+
+
+def _pair_with_decoys():
+    """An object seen twice, the target with a decoy point for 95 % of the source's
+    points: a point elsewhere whose code is nearer to that source point's than its true
+    partner's, so the right match is only second nearest."""
+    rng = np.random.default_rng(2)
+    shape = make_object(400, shape_seed=5, sample_seed=0)
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_euler("zyx", [70, -20, 15], degrees=True).as_matrix()
+    truth[:3, 3] = [0.2, 0.1, -0.3]
+    source = apply_transform(shape, np.linalg.inv(truth))
+    decoyed = rng.permutation(400)[:380]
+    target = np.r_[shape, rng.uniform(shape.min(axis=0), shape.max(axis=0), (380, 3))]
+    dim = 8
+    src_codes = rng.normal(0, 1, (400, dim))
+    tgt_codes = np.r_[
+        src_codes + rng.normal(0, 1e-2, (400, dim)),
+        src_codes[decoyed] + rng.normal(0, 1e-3, (380, dim)),
+    ]
+    return source, target, truth, _Codes({400: src_codes, 780: tgt_codes})
+
+
+def test_two_nearest_matches_hold_the_partners_that_are_second_nearest():
+    source, target, truth, descriptor = _pair_with_decoys()
+    found = {
+        k: _run(ConsensusGlobal(n_nearest=k, both_directions=False), source, target, descriptor)
+        for k in (1, 2)
+    }
+    right = {}
+    for k, result in found.items():
+        matches = result.steps[0].matches
+        moved = apply_transform(matches[:, 0], truth)
+        right[k] = int((np.linalg.norm(moved - matches[:, 1], axis=1) < 1e-6).sum())
+    assert right[1] == 20 and right[2] == 400
+    assert rotation_error_deg(found[2].transformation, truth) < 1.0
+
+
+def test_two_nearest_refuses_the_filters_defined_on_the_nearest_alone():
+    for step in (
+        ConsensusGlobal(n_nearest=2, mutual_filter=True),
+        ConsensusGlobal(n_nearest=2, max_ratio=0.9),
+    ):
+        with pytest.raises(ValueError, match="n_nearest"):
+            step._validate_all()
+    ConsensusGlobal(n_nearest=2)._validate_all()
