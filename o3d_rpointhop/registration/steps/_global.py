@@ -92,12 +92,20 @@ class GlobalStep(RegistrationStep):
     def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
         src, tgt = self._describe(context)
         corr = find_correspondences(src, tgt, **filters)
-        if len(corr) < 3:
-            raise ValueError(
-                f"{type(self).__name__}: only {len(corr)} correspondences survived the "
-                "filters; at least 3 are needed (relax mutual_filter / max_ratio / top_k)"
-            )
+        self._enough(
+            len(corr),
+            "correspondences survived the filters",
+            "relax mutual_filter / max_ratio / top_k",
+        )
         return corr
+
+    def _enough(self, count: int, what: str, remedy: str) -> None:
+        """Refuse fewer than 3 matches (a rigid motion needs 3), naming the step, what
+        was counted and what to relax."""
+        if count < 3:
+            raise ValueError(
+                f"{type(self).__name__}: only {count} {what}; at least 3 are needed ({remedy})"
+            )
 
     @staticmethod
     def _measured(

@@ -234,11 +234,9 @@ class ConsensusGlobal(GlobalStep):
         src, tgt = self._describe(context)
         share = float(self.salient_share)
         keep = salient(src, share)[corr.pairs[:, 0]] & salient(tgt, share)[corr.pairs[:, 1]]
-        if keep.sum() < 3:
-            raise ValueError(
-                f"{type(self).__name__}: only {int(keep.sum())} matches join two salient "
-                f"points (salient_share={share}); at least 3 are needed"
-            )
+        self._enough(
+            int(keep.sum()), "matches join two salient points", f"raise salient_share={share}"
+        )
         return Correspondences(corr.pairs[keep], corr.distances[keep], corr.ratios[keep])
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
