@@ -205,3 +205,20 @@ def test_an_up_prior_rejects_hypotheses_that_turn_the_source_upside_down(object_
     assert context.upright(np.stack([np.eye(3), flip])).tolist() == [True, False]
     with pytest.raises(ValueError, match="up must be a non-zero vector"):
         RegistrationContext(source, target, up=[0.0, 0.0, 0.0])
+
+
+def test_filters_that_leave_fewer_than_three_matches_are_a_clear_error():
+    from o3d_rpointhop import RANSACGlobal, RegistrationPipeline
+
+    rng = np.random.default_rng(0)
+    target = make_object(200, shape_seed=1, sample_seed=0)
+    source = target[:199] + rng.normal(0, 1e-3, (199, 3))
+
+    class Noise:  # unrelated random descriptors (seeded by the cloud's size)
+        def transform(self, X):
+            n = len(np.asarray(X.points if hasattr(X, "points") else X))
+            return np.random.default_rng(n).normal(size=(n, 4))
+
+    pipe = RegistrationPipeline([("global", RANSACGlobal(max_ratio=1e-6))], descriptor=Noise())
+    with pytest.raises(ValueError, match=r"RANSACGlobal: only 0 correspondences survived"):
+        pipe.register(source, target)
