@@ -199,7 +199,7 @@ def registration_options(
         raise UsageError(f"[register]: {exc}") from None
     for _, step in chain:  # every value checked now, before any cloud is read
         try:
-            step._validate_params()
+            step._validate_all()
         except (ValueError, TypeError) as exc:
             raise UsageError(f"[{_section_of(step)[0]}]: {exc}") from None
     first = chain[0][1] if chain[0][0] == "global" else None

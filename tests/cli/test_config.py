@@ -79,6 +79,18 @@ def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pai
         (["--set", "ransac.max_iteration=-5"], "[ransac]: The 'max_iteration' parameter", 2),
         (["--set", "ransac.max_iteration=abc"], "[ransac]: The 'max_iteration' parameter", 2),
         (["--set", "settings.icp_factors=[]"], "[settings]:", 2),
+        (  # a check that relates two parameters: also before any cloud is read
+            [
+                "--global",
+                "consensus",
+                "--set",
+                "consensus.n_nearest=2",
+                "--set",
+                "consensus.mutual_filter=true",
+            ],
+            "[consensus]: ConsensusGlobal: n_nearest=2 cannot be combined",
+            2,
+        ),  # fmt: skip
         (["--config", "missing.toml"], "no such config file", EXIT_ERROR),
     ],
 )
