@@ -105,8 +105,9 @@ def _heap_pop(keys, items, size):  # pragma: no cover - compiled
 
 
 @kernel()
-def _farthest_points(points, candidates, m, start, neighbours, reach):
-    # pragma: no cover - compiled
+def _farthest_points(
+    points, candidates, m, start, neighbours, reach
+):  # pragma: no cover - compiled
     """Positions (among ``candidates``, rows of ``points``) of the ``m``-point farthest
     point sample from position ``start``, in the order picked.
 

@@ -176,3 +176,23 @@ def test_spatial_order_is_a_permutation_that_keeps_neighbours_together():
     assert step < scattered / 5  # consecutive points are near each other
     # Points in one Morton cell stay in input order; a cloud without extent is kept.
     np.testing.assert_array_equal(spatial_order(np.zeros((4, 3))), np.arange(4))
+
+
+def test_sampling_refuses_sizes_it_cannot_draw_and_keeps_small_clouds_whole():
+    from o3d_rpointhop.descriptors.pointhop._sampling import _thin
+
+    points = make_blob(50)
+    for method in ("fps", "poisson"):
+        with pytest.raises(ValueError, match="must not increase|cannot sample 60 of 50"):
+            hop_subsets(points, [60], method)
+        with pytest.raises(ValueError, match="cannot sample 0 of"):
+            hop_subsets(points, [20, 0], method)
+    with pytest.raises(ValueError, match="must not increase"):
+        fps_subsets(points, [10, 20])
+    with pytest.raises(ValueError, match="cannot sample 51 of 50"):
+        poisson_disk_subset(points, 51)
+    np.testing.assert_array_equal(_thin(points, 50), np.arange(50))  # nothing to thin
+    np.testing.assert_array_equal(_thin(points[:1], 1), [0])  # one point, no neighbour
+    whole = hop_subsets(points, [50, 20], "poisson")
+    np.testing.assert_array_equal(whole[0], np.arange(50))  # the whole cloud, as given
+    assert len(whole[1]) == 20 and set(whole[1]) <= set(whole[0])
