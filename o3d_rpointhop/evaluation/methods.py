@@ -317,6 +317,14 @@ METHODS = _methods(
         model="scene",
     ),
     Method(
+        "rpointhop-scene-salient-8192",
+        "R-PointHop, shipped scene model, 8192 global points, consensus on matches between "
+        "salient points (salient_share=0.75) + point-to-plane ICP",
+        _register_with(global_method=consensus_salient, n_global_points=8192),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-up",
         "R-PointHop, shipped scene model, register() defaults, up-axis prior (camera -y)",
         _register_with(up=CAMERA_UP),
