@@ -51,8 +51,9 @@ class RansacResult:
     iterations : int
         Hypotheses drawn.
     hypotheses : ndarray of shape (k, 4, 4)
-        The best ``n_hypotheses`` distinct hypotheses, each refitted, best first
-        (``transformation`` is the first); empty when no sample passed the checkers.
+        The best ``n_hypotheses`` distinct hypotheses, best first (``transformation``
+        is the first, refitted; with ``clouds`` the others are as drawn, without them
+        refitted on the matches); empty when no sample passed the checkers.
     """
 
     transformation: np.ndarray
@@ -195,8 +196,8 @@ def ransac(
         ``upright(rotations) -> bool mask``: hypotheses it rejects are dropped (an
         up-axis prior); ``None`` keeps all.
     n_hypotheses : int, default=1
-        How many of the best-ranked distinct hypotheses to return, each refitted
-        (:func:`~._hypotheses.distinct`).
+        How many of the best-ranked distinct hypotheses to return
+        (:func:`~._hypotheses.distinct`); see ``hypotheses`` in :class:`RansacResult`.
 
     Returns
     -------
@@ -261,7 +262,11 @@ def ransac(
             pool_rot, pool_shift = pool_rot[order], pool_shift[order]
         picked = pick_distinct(pool_rot, pool_shift, n_hypotheses, source.mean(axis=0), threshold)
         if clouds is not None:
-            hypotheses = np.stack([_refit_on_clouds(t, clouds, grid) for t in picked])
+            # Only the step's own choice is refitted: the others are refined by the
+            # verification's short ICP before they are scored (a rival that wins is
+            # returned as drawn, and the steps after the global one refine it).
+            first = _refit_on_clouds(picked[0], clouds, grid)
+            hypotheses = np.concatenate([first[None], picked[1:]])
         else:
             hypotheses = np.stack(
                 [_refit_on_matches(t, planes, sq_threshold, source, target) for t in picked]

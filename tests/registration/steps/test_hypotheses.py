@@ -218,3 +218,25 @@ def test_verify_on_clouds_too_wide_for_a_grid_uses_open3d_icp(monkeypatch):
     assert on_trees.best == on_grid.best == 1
     np.testing.assert_allclose(on_trees.refined, on_grid.refined, atol=1e-6)
     np.testing.assert_allclose(on_trees.scores, on_grid.scores, rtol=1e-6)
+
+
+def test_ransac_s_own_choice_does_not_depend_on_how_many_are_verified():
+    """With whole clouds to rank by, the first hypothesis (the one refitted, the step's
+    own choice) is the same bytes whether one or three are handed on, and the others
+    are distinct from it."""
+    from o3d_rpointhop.registration.steps._hypotheses import DISTINCT_ANGLE_DEG
+    from o3d_rpointhop.registration.steps._ransac import ransac
+
+    source, target, _, _, _, (src_rows, tgt_rows) = _planted_pair()
+    common = dict(max_iteration=20000, confidence=0.999, edge_length=0.9, seed=3)
+    one = ransac(source[src_rows], target[tgt_rows], 0.03, clouds=(source, target), **common)
+    three = ransac(
+        source[src_rows], target[tgt_rows], 0.03, clouds=(source, target), n_hypotheses=3,
+        **common,
+    )  # fmt: skip
+    assert len(one.hypotheses) == 1 and len(three.hypotheses) >= 2
+    np.testing.assert_array_equal(three.hypotheses[0], one.transformation)
+    for other in three.hypotheses[1:]:
+        moved = np.linalg.norm(other[:3, 3] - one.transformation[:3, 3])
+        turned = rotation_error_deg(other, one.transformation)
+        assert turned > DISTINCT_ANGLE_DEG or moved > 0.03
