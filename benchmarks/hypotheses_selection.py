@@ -4,14 +4,16 @@ Every candidate (``n_hypotheses``, and the share by which a rival must outscore 
 step's own choice to replace it, ``_hypotheses.SWITCH_MARGIN``) registers the same
 pairs through ``register()``'s object path (the shipped object model, RANSAC +
 point-to-plane ICP) on every training shape, for two seeds of each protocol (whole
-resampled pairs, noisy ones, 70 % crops). No test shape is touched. Writes
+resampled pairs, noisy ones, 70 % crops), and FPFH through the same RANSAC (the step's
+default serves both descriptors). No test shape is touched. Writes
 ``benchmarks/results/hypotheses_selection.{json,md}``.
 
 The rule: the most partial pairs up to symmetry over both seeds among the candidates
-that keep every whole and noisy pair the unverified RANSAC registers up to symmetry and
-cost at most :data:`MAX_TIME_RATIO` its time per pair (the median over pairs of the
-candidate's time over the unverified step's on the same pair: every candidate runs on a
-pair before the next pair, so the machine's drift is shared); ties go to the faster.
+that keep every whole and noisy pair the unverified RANSAC registers up to symmetry,
+with R-PointHop and with FPFH, and cost R-PointHop at most :data:`MAX_TIME_RATIO` its
+time per pair (the median over pairs of the candidate's time over the unverified
+step's on the same pair: every candidate runs on a pair before the next pair, so the
+machine's drift is shared); ties go to the faster.
 
 Usage: python benchmarks/hypotheses_selection.py [--data PATH] [--seeds 7,8]
        [--max-shapes N]
@@ -48,17 +50,18 @@ def _name(k: int, margin: float) -> str:
     return "unverified" if k == 1 else f"{k} hypotheses, switch at +{margin:.0%}"
 
 
-def _method(k: int) -> str:
-    """A benchmark method of RANSAC with ``k`` hypotheses (registered for this run)."""
-    name = f"selection-ransac-{k}"
+def _method(k: int, fpfh: bool = False) -> str:
+    """A benchmark method of RANSAC with ``k`` hypotheses (registered for this run), on
+    the benchmark's descriptor or on FPFH."""
+    name = f"selection-{'fpfh-' if fpfh else ''}ransac-{k}"
 
     def step():
         return RANSACGlobal(n_hypotheses=k)
 
     step.__name__ = f"ransac_{k}_hypotheses"
-    methods.METHODS[name] = methods.Method(
-        name, f"RANSAC verifying {k}", methods._register_with(global_method=step)
-    )
+    run = (methods._fpfh_pipeline if fpfh else methods._register_with)(global_method=step)
+    extra = {"model": None, "descriptor": "fpfh"} if fpfh else {}
+    methods.METHODS[name] = methods.Method(name, f"RANSAC verifying {k}", run, **extra)
     return name
 
 
@@ -70,12 +73,19 @@ def choose(out: dict) -> str:
 
     def keeps(row):
         fast = row["median_time_ratio"] <= MAX_TIME_RATIO
-        return fast and all(row[p]["symmetric"] >= base[p]["symmetric"] for p in whole)
+        return fast and all(
+            row[key][p]["symmetric"] >= base[key][p]["symmetric"]
+            for key in ("rpointhop", "fpfh")
+            for p in whole
+        )
 
     kept = [n for n, row in rows.items() if keeps(row)]
     return max(
         kept,
-        key=lambda n: (rows[n]["resampled-partial"]["symmetric"], -rows[n]["median_time_ratio"]),
+        key=lambda n: (
+            rows[n]["rpointhop"]["resampled-partial"]["symmetric"],
+            -rows[n]["median_time_ratio"],
+        ),
     )
 
 
@@ -101,34 +111,46 @@ def main() -> None:
     out["provenance"] = run_provenance([], None)
     out["provenance"]["descriptor"] = model_identity(model)
     default = _hypotheses.SWITCH_MARGIN
-    names = {candidate: _method(candidate[0]) for candidate in CANDIDATES}
-    counts = {c: {p: {"successes": 0, "symmetric": 0} for p in PROTOCOLS} for c in CANDIDATES}
+    names = {
+        candidate: {"rpointhop": _method(candidate[0]), "fpfh": _method(candidate[0], True)}
+        for candidate in CANDIDATES
+    }
+    counts = {
+        c: {key: {p: {"successes": 0, "symmetric": 0} for p in PROTOCOLS} for key in names[c]}
+        for c in CANDIDATES
+    }
     seconds = {c: [] for c in CANDIDATES}
     try:
         with thread_budget("one"):
             for protocol in PROTOCOLS:
                 for seed in seeds:
                     pairs = make_pairs(shapes, protocol, seed)
-                    bar = Progress(len(pairs) * len(CANDIDATES), f"{protocol} {seed}", True)
+                    bar = Progress(len(pairs) * len(CANDIDATES) * 2, f"{protocol} {seed}", True)
                     # Every candidate on a pair before the next pair: the machine's speed
                     # drifts over minutes, and so the candidates' times share its drift.
                     for i, pair in enumerate(pairs):
-                        for candidate, method in names.items():
+                        for candidate, pair_methods in names.items():
                             _hypotheses.SWITCH_MARGIN = candidate[1]
-                            summary, records = evaluate_methods(
-                                [pair], [method], model, voxel_of, seed, bar, shapes[i : i + 1]
-                            )
-                            tally = counts[candidate][protocol]
-                            tally["successes"] += round(summary[method]["success_rate"])
-                            tally["symmetric"] += round(
-                                summary[method]["success_rate_up_to_symmetry"]
-                            )
-                            seconds[candidate].append(records[method][0].seconds)
+                            for key, method in pair_methods.items():
+                                summary, records = evaluate_methods(
+                                    [pair], [method], model, voxel_of, seed, bar, shapes[i : i + 1]
+                                )
+                                tally = counts[candidate][key][protocol]
+                                tally["successes"] += round(summary[method]["success_rate"])
+                                tally["symmetric"] += round(
+                                    summary[method]["success_rate_up_to_symmetry"]
+                                )
+                                if key == "rpointhop":
+                                    seconds[candidate].append(records[method][0].seconds)
     finally:
         _hypotheses.SWITCH_MARGIN = default
     base = np.asarray(seconds[CANDIDATES[0]])
     for candidate in CANDIDATES:
-        row = {p: {"pairs": len(shapes) * len(seeds), **counts[candidate][p]} for p in PROTOCOLS}
+        n_pairs = len(shapes) * len(seeds)
+        row = {
+            key: {p: {"pairs": n_pairs, **counts[candidate][key][p]} for p in PROTOCOLS}
+            for key in ("rpointhop", "fpfh")
+        }
         row["median_seconds"] = float(np.median(seconds[candidate]))
         # The time against the unverified step, pair by pair, then the median of those.
         row["median_time_ratio"] = float(np.median(np.asarray(seconds[candidate]) / base))
@@ -146,18 +168,23 @@ def _markdown(out: dict) -> str:
         "",
         f"{out['shapes']} training shapes, seeds {', '.join(map(str, out['seeds']))} "
         f"({n} pairs per protocol); register()'s object path (shipped object model, "
-        "RANSAC + point-to-plane ICP), one thread. Successes up to symmetry (strict in "
-        f"brackets). The rule: the most crops among the candidates that keep every whole "
-        f"and noisy pair and cost at most {MAX_TIME_RATIO:.2f}x the unverified time (the "
-        "median over pairs of the time on a pair against the unverified step's on it; "
-        "every candidate runs on a pair before the next).",
+        "RANSAC + point-to-plane ICP), and FPFH through the same RANSAC, one thread. "
+        "Successes up to symmetry (strict in brackets). The rule: the most R-PointHop "
+        "crops among the candidates that keep every whole and noisy pair, with both "
+        f"descriptors, and cost R-PointHop at most {MAX_TIME_RATIO:.2f}x the unverified "
+        "time (the median over pairs of the time on a pair against the unverified "
+        "step's on it; every candidate runs on a pair before the next).",
         "",
-        "| candidate | resampled | noisy | partial (70 % crops) | median s per pair | "
-        "time against unverified |",
-        "|---|---|---|---|---|---|",
+        "| candidate | resampled | noisy | partial (70 % crops) | FPFH: resampled | "
+        "noisy | partial | median s per pair | time against unverified |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, row in out["candidates"].items():
-        cells = [f"{row[p]['symmetric']} ({row[p]['successes']})" for p in PROTOCOLS]
+        cells = [
+            f"{row[key][p]['symmetric']} ({row[key][p]['successes']})"
+            for key in ("rpointhop", "fpfh")
+            for p in PROTOCOLS
+        ]
         mark = " **chosen**" if name == out["chosen"] else ""
         lines.append(
             f"| {name}{mark} | "
