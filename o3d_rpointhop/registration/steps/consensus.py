@@ -200,13 +200,12 @@ class ConsensusGlobal(GlobalStep):
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
         filters = dict(mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
+        src, tgt = self._describe(context)
         if self.n_nearest > 1:
-            src, tgt = self._describe(context)
             corr = k_best_correspondences(src, tgt, self.n_nearest)
         else:
             corr = self._correspond(context, **filters)
         if self.both_directions and not self.mutual_filter:
-            src, tgt = self._describe(context)
             back = (
                 k_best_correspondences(tgt, src, self.n_nearest)
                 if self.n_nearest > 1
