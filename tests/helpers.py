@@ -169,3 +169,15 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+class CodesBySize:
+    """A descriptor of fixed codes for planted matches: ``codes[n]`` are the rows of the
+    cloud of ``n`` points (the clouds of a pair are told apart by their sizes; the
+    pipeline keeps a small cloud's rows in order)."""
+
+    def __init__(self, codes: dict[int, np.ndarray]):
+        self.codes = codes
+
+    def transform(self, X):
+        return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]

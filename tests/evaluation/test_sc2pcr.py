@@ -7,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import CodesBySize
 from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 
@@ -64,16 +65,6 @@ def test_seeds_are_local_maxima_first():
     assert _seeds(source, confidence, radius=0.1, ratio=0.5).tolist() == [0]
 
 
-class _Codes:
-    """A descriptor of fixed codes, told apart by the cloud's size."""
-
-    def __init__(self, codes):
-        self.codes = codes
-
-    def transform(self, X):
-        return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
-
-
 def test_as_a_step_it_runs_on_the_consensus_matches():
     rng = np.random.default_rng(2)
     room = make_room(1500, seed=2)
@@ -82,7 +73,7 @@ def test_as_a_step_it_runs_on_the_consensus_matches():
     source = apply_transform(room[keep], np.linalg.inv(truth))
     target_codes = rng.normal(size=(1500, 6))
     source_codes = target_codes[keep] + rng.normal(0, 1e-3, (1400, 6))
-    descriptor = _Codes({1400: source_codes, 1500: target_codes})
+    descriptor = CodesBySize({1400: source_codes, 1500: target_codes})
 
     step = SC2PCRGlobal()
     assert clone(step).get_params() == step.get_params()

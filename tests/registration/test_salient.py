@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import CodesBySize
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import ConsensusGlobal, RegistrationPipeline, RegistrationWarning
@@ -29,16 +30,6 @@ def test_salient_keeps_the_distinct_rows_and_the_share_asked_for():
         salient(features, 0.0)
 
 
-class _Codes:
-    """A descriptor of fixed codes, told apart by the cloud's size."""
-
-    def __init__(self, codes):
-        self.codes = codes
-
-    def transform(self, X):
-        return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
-
-
 def _pair_with_a_floor():
     """An object standing on a floor, seen twice. The object's points carry codes
     shared with their true partners; the floor's points all carry nearly one code, so
@@ -57,7 +48,7 @@ def _pair_with_a_floor():
     tgt_codes[300:] += rng.normal(0, 1e-3, (700, dim))
     src_codes = tgt_codes[keep] + rng.normal(0, 1e-6, (900, dim))
     src_codes[keep >= 300] = 5.0 + rng.normal(0, 1e-3, ((keep >= 300).sum(), dim))
-    return source, target, truth, _Codes({900: src_codes, 1000: tgt_codes})
+    return source, target, truth, CodesBySize({900: src_codes, 1000: tgt_codes})
 
 
 def _run(step, source, target, descriptor):
@@ -109,7 +100,7 @@ def _pair_with_decoys():
         src_codes + rng.normal(0, 1e-2, (400, dim)),
         src_codes[decoyed] + rng.normal(0, 1e-3, (380, dim)),
     ]
-    return source, target, truth, _Codes({400: src_codes, 780: tgt_codes})
+    return source, target, truth, CodesBySize({400: src_codes, 780: tgt_codes})
 
 
 def test_two_nearest_matches_hold_the_partners_that_are_second_nearest():

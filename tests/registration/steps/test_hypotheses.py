@@ -7,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import CodesBySize
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -25,18 +26,6 @@ from o3d_rpointhop.registration.steps._hypotheses import (
     verify,
 )
 from o3d_rpointhop.transforms import rotation_error_deg
-
-
-class _Planted:
-    """A descriptor that makes exactly the planted matches: matched points share a
-    code, every other point has a code of its own (its nearest code is far away, so
-    its match agrees with nothing). Clouds are told apart by their size."""
-
-    def __init__(self, codes: dict[int, np.ndarray]):
-        self.codes = codes
-
-    def transform(self, X):
-        return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
 
 
 def _planted_pair():
@@ -78,7 +67,7 @@ def _planted_pair():
         code = rng.normal(size=dim)
         src_codes[s], tgt_codes[t] = code, code
     assert len(source) != len(target)
-    descriptor = _Planted({len(source): src_codes, len(target): tgt_codes})
+    descriptor = CodesBySize({len(source): src_codes, len(target): tgt_codes})
     planted = (np.r_[right_src, wrong_src], np.r_[right_tgt, wrong_tgt])
     return source, target, truth, wrong, descriptor, planted
 
