@@ -39,6 +39,8 @@ from o3d_rpointhop.registration.steps import _hypotheses
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PROTOCOLS = ("resampled", "resampled-noise", "resampled-partial")
+#: The descriptors every candidate runs with: the shipped object model and FPFH.
+DESCRIPTORS = ("rpointhop", "fpfh")
 #: (n_hypotheses, switch margin): 1 is RANSAC's own choice.
 CANDIDATES = ((1, 0.0), (3, 0.1), (3, 0.3), (5, 0.3))
 #: The room the speed target leaves register() on objects: at most 0.7x Open3D's recipe
@@ -75,7 +77,7 @@ def choose(out: dict) -> str:
         fast = row["median_time_ratio"] <= MAX_TIME_RATIO
         return fast and all(
             row[key][p]["symmetric"] >= base[key][p]["symmetric"]
-            for key in ("rpointhop", "fpfh")
+            for key in DESCRIPTORS
             for p in whole
         )
 
@@ -112,7 +114,7 @@ def main() -> None:
     out["provenance"]["descriptor"] = model_identity(model)
     default = _hypotheses.SWITCH_MARGIN
     names = {
-        candidate: {"rpointhop": _method(candidate[0]), "fpfh": _method(candidate[0], True)}
+        candidate: {key: _method(candidate[0], key == "fpfh") for key in DESCRIPTORS}
         for candidate in CANDIDATES
     }
     counts = {
@@ -149,7 +151,7 @@ def main() -> None:
         n_pairs = len(shapes) * len(seeds)
         row = {
             key: {p: {"pairs": n_pairs, **counts[candidate][key][p]} for p in PROTOCOLS}
-            for key in ("rpointhop", "fpfh")
+            for key in DESCRIPTORS
         }
         row["median_seconds"] = float(np.median(seconds[candidate]))
         # The time against the unverified step, pair by pair, then the median of those.
@@ -182,7 +184,7 @@ def _markdown(out: dict) -> str:
     for name, row in out["candidates"].items():
         cells = [
             f"{row[key][p]['symmetric']} ({row[key][p]['successes']})"
-            for key in ("rpointhop", "fpfh")
+            for key in DESCRIPTORS
             for p in PROTOCOLS
         ]
         mark = " **chosen**" if name == out["chosen"] else ""

@@ -76,6 +76,18 @@ def _as_features(x, name: str) -> np.ndarray:
     return arr
 
 
+def _feature_pair(source_features, target_features) -> tuple[np.ndarray, np.ndarray]:
+    """Both sides' descriptors as arrays (:func:`_as_features`), refused when their
+    lengths differ."""
+    src = _as_features(source_features, "source_features")
+    tgt = _as_features(target_features, "target_features")
+    if src.shape[1] != tgt.shape[1]:
+        raise ValueError(
+            f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
+        )
+    return src, tgt
+
+
 def nearest_descriptors(
     queries: np.ndarray, references: np.ndarray, k: int = 2
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -246,12 +258,7 @@ def find_correspondences(
     >>> find_correspondences(a, a[::-1]).pairs[:, 1].tolist()
     [3, 2, 1, 0]
     """
-    src = _as_features(source_features, "source_features")
-    tgt = _as_features(target_features, "target_features")
-    if src.shape[1] != tgt.shape[1]:
-        raise ValueError(
-            f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
-        )
+    src, tgt = _feature_pair(source_features, target_features)
     n = len(src)
     top_k = None if top_k is None else count_of(top_k, n)
     top_k_ratio = None if top_k_ratio is None else count_of(top_k_ratio, n)
@@ -303,12 +310,7 @@ def k_best_correspondences(source_features, target_features, k: int) -> Correspo
     """
     if isinstance(k, bool) or not isinstance(k, Integral) or k < 1:
         raise ValueError(f"k must be an int >= 1, got {k!r}")
-    src = _as_features(source_features, "source_features")
-    tgt = _as_features(target_features, "target_features")
-    if src.shape[1] != tgt.shape[1]:
-        raise ValueError(
-            f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
-        )
+    src, tgt = _feature_pair(source_features, target_features)
     k = min(int(k), len(tgt))
     idx, dist = nearest_descriptors(src, tgt, k=k + 1)
     if dist.shape[1] == k:  # no next nearest: the last match's ratio is 1
