@@ -373,3 +373,57 @@ def test_every_reader_of_float32_files_says_when_they_are_too_coarse(tmp_path):
         warnings.simplefilter("error")
         read_cloud(tmp_path / "ours.e57")
         read_cloud(tmp_path / "f64.ply")
+
+
+def test_meshes_of_flat_triangles_and_of_vertex_colours(tmp_path):
+    """A mesh whose triangles all have zero area is refused; vertex colours are carried
+    to the samples, each a blend of its triangle's corners."""
+    flat = o3d.geometry.TriangleMesh()
+    flat.vertices = o3d.utility.Vector3dVector([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]])
+    flat.triangles = o3d.utility.Vector3iVector([[0, 1, 2]])
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "flat.obj"), flat)
+    with pytest.raises(ValueError, match="every triangle of this mesh has zero area"):
+        read_cloud(tmp_path / "flat.obj")
+    box = o3d.geometry.TriangleMesh.create_box()
+    red = np.tile([1.0, 0.0, 0.0], (len(box.vertices), 1))
+    red[np.asarray(box.vertices)[:, 2] > 0.5] = [0.0, 0.0, 1.0]  # the top corners blue
+    box.vertex_colors = o3d.utility.Vector3dVector(red)
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "box.off"), box)
+    cloud = read_cloud(tmp_path / "box.off", mesh_points=4000)
+    colours, z = np.asarray(cloud.colors), np.asarray(cloud.points)[:, 2]
+    assert colours.shape == (4000, 3) and np.allclose(colours.sum(axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(colours[np.isclose(z, 0.0), 0], 1.0, atol=1e-6)  # bottom: red
+    np.testing.assert_allclose(colours[np.isclose(z, 1.0), 2], 1.0, atol=1e-6)  # top: blue
+    side = ~np.isclose(z, 0.0) & ~np.isclose(z, 1.0)
+    np.testing.assert_allclose(colours[side, 2], z[side], atol=1e-6)  # blended by height
+
+
+def test_odd_files_get_one_clear_line(tmp_path):
+    """PLY headers that say something unreadable, a path that is not a regular file,
+    and .npz archives: several arrays without one named 'points' are refused, a single
+    array is read whatever its name."""
+    vertex = b"element vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+    headers = {
+        "word.ply": (b"ply\nformat ascii 1.0\nbogus line\nend_header\n", "bad header line"),
+        "format.ply": (
+            b"ply\nformat weird 1.0\n" + vertex + b"end_header\n0 0 0\n",
+            "unknown PLY format 'weird'",
+        ),
+        "faces.ply": (
+            b"ply\nformat ascii 1.0\nelement face 0\n"
+            b"property list uchar int vertex_indices\nend_header\n",
+            "it has no vertex element",
+        ),
+    }
+    for name, (data, message) in headers.items():
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ValueError, match=f"{name}: damaged or unreadable .ply file.*{message}"):
+            read_cloud(tmp_path / name)
+    with pytest.raises(ValueError, match="not a regular file"):
+        read_cloud("/dev/null")
+    points = make_object(50, shape_seed=2)
+    np.savez(tmp_path / "two.npz", a=points, b=points)
+    with pytest.raises(ValueError, match=r"has arrays \['a', 'b'\] but none named 'points'"):
+        read_cloud(tmp_path / "two.npz")
+    np.savez(tmp_path / "one.npz", points)
+    np.testing.assert_allclose(np.asarray(read_cloud(tmp_path / "one.npz").points), points)

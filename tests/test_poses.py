@@ -147,6 +147,23 @@ def test_registration_results_round_trip(tmp_path):
         (tmp_path / "cut.json").write_text(saved[:cut])
         with pytest.raises(ValueError, match=r"JSON cut short"):
             RegistrationResult.load(tmp_path / "cut.json")
+    # A binary file, a file of another format version and provenance JSON cannot hold
+    # are each refused with what is wrong, not a decoder's traceback.
+    (tmp_path / "binary.json").write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(ValueError, match="not UTF-8 text"):
+        RegistrationResult.load(tmp_path / "binary.json")
+    body["format"] = 99
+    (tmp_path / "future.json").write_text(json.dumps(body))
+    with pytest.raises(ValueError, match="result format 99, expected 1"):
+        RegistrationResult.load(tmp_path / "future.json")
+    with pytest.raises(TypeError, match="cannot write object to JSON"):
+        result.save(tmp_path / "odd.json", provenance={"made by": object()})
+    # numpy values in the provenance are written as JSON's own numbers and lists.
+    result.save(tmp_path / "np.json", provenance={"seed": np.int64(3), "shift": np.zeros(2)})
+    assert json.loads((tmp_path / "np.json").read_text())["provenance"] == {
+        "seed": 3,
+        "shift": [0.0, 0.0],
+    }
 
 
 def test_evaluate_scores_a_given_transformation_like_open3d():

@@ -188,3 +188,44 @@ def test_the_global_step_and_resolution_can_be_chosen():
     assert len(starved.edges) < len(auto.edges)
     with pytest.raises(ValueError, match="global_method"):
         register_multiway(scans, global_method="magic")
+
+
+def test_many_scans_pair_each_with_its_nearest_by_pooled_descriptor_and_its_neighbours():
+    """Above ALL_PAIRS_UP_TO scans the candidates are the scans in the given order's
+    neighbours plus each scan's RETRIEVED_NEIGHBOURS nearest by mean descriptor: here
+    scans i and i + 7 share their descriptors and nothing else does."""
+    from o3d_rpointhop.registration.multiway import ALL_PAIRS_UP_TO, _candidates
+
+    n = 14
+    assert n > ALL_PAIRS_UP_TO
+    rng = np.random.default_rng(0)
+    codes = np.eye(7) * 10.0 + rng.uniform(0.0, 1.0, (7, 7))
+    features = [np.tile(codes[k % 7], (50, 1)) for k in range(n)]
+    chain = {(k, k + 1) for k in range(n - 1)}
+    twins = {(k, k + 7) for k in range(7)}
+    assert _candidates(features, 1) == sorted(chain | twins)
+    # More neighbours retrieved: a superset, still each pair once, smaller index first.
+    wider = _candidates(features, 3)
+    assert set(wider) > chain | twins and len(wider) == len(set(wider))
+    assert all(i < j for i, j in wider) and len(wider) < n * (n - 1) // 2
+    # Up to the threshold, every pair.
+    assert _candidates(features[:ALL_PAIRS_UP_TO], 1) == [
+        (i, j) for i in range(ALL_PAIRS_UP_TO) for j in range(i + 1, ALL_PAIRS_UP_TO)
+    ]
+
+
+def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
+    """The retrieval path end to end (its threshold lowered so that five scans take it):
+    fewer pairs tried than all of them, the given order's neighbours among them, and
+    every pose recovered."""
+    from o3d_rpointhop.registration import multiway
+
+    monkeypatch.setattr(multiway, "ALL_PAIRS_UP_TO", 3)
+    monkeypatch.setattr(multiway, "RETRIEVED_NEIGHBOURS", 1)
+    scans, truth = partial_views(5, seed=2)
+    result = register_multiway(scans, seed=0)
+    assert {(k, k + 1) for k in range(4)} <= set(result.pairs)
+    assert len(result.pairs) < 10
+    assert result.unconnected == []
+    for k in range(1, 5):
+        assert rotation_error_deg(result.poses[k], truth[k]) < 2.0

@@ -55,6 +55,25 @@ def test_the_same_matches_give_the_same_bytes():
     np.testing.assert_array_equal(a.inliers, b.inliers)
 
 
+def test_an_up_prior_that_refuses_every_hypothesis_leaves_no_estimate():
+    """Hypotheses the up prior rejects cannot win: when it rejects them all, the step
+    has no estimate (the identity, no hypotheses) rather than a refused pose."""
+    source, target, truth, _ = synthetic_matches(800, 0.9, seed=4)
+    kwargs = dict(compatibility_threshold=0.02, inlier_threshold=0.02, score_threshold=0.03)
+    free = consensus(source, target, **kwargs)
+    assert rotation_error_deg(free.transformation, truth) < 0.2
+    seen = []
+
+    def refuse_all(rotations):
+        seen.append(len(rotations))
+        return np.zeros(len(rotations), dtype=bool)
+
+    none = consensus(source, target, upright=refuse_all, n_hypotheses=3, **kwargs)
+    assert seen and seen[0] == none.n_hypotheses > 0  # every seed's fit was asked
+    np.testing.assert_array_equal(none.transformation, np.eye(4))
+    assert none.hypotheses.shape == (0, 4, 4)
+
+
 def test_the_thread_count_does_not_change_a_byte():
     source, target, _, _ = synthetic_matches(1500, 0.97, seed=6)
     kwargs = dict(compatibility_threshold=0.02, inlier_threshold=0.02, score_threshold=0.03)
