@@ -229,3 +229,78 @@ def test_ransac_s_own_choice_does_not_depend_on_how_many_are_verified():
         moved = np.linalg.norm(other[:3, 3] - one.transformation[:3, 3])
         turned = rotation_error_deg(other, one.transformation)
         assert turned > DISTINCT_ANGLE_DEG or moved > 0.03
+
+
+def _box(n: int, seed: int) -> np.ndarray:
+    """``n`` points on the surface of a 2 x 1 x 0.5 box about the origin (a half-turn
+    about z maps it onto itself), each face sampled by its area."""
+    rng = np.random.default_rng(seed)
+    half = np.array([1.0, 0.5, 0.25])
+    areas = np.array([half[1] * half[2], half[0] * half[2], half[0] * half[1]])
+    axis = rng.choice(3, size=n, p=areas / areas.sum())
+    points = rng.uniform(-half, half, (n, 3))
+    points[np.arange(n), axis] = half[axis] * rng.choice([-1.0, 1.0], n)
+    return points
+
+
+def test_weighted_matches_tell_poses_that_overlap_alike():
+    """A box and its half-turn overlap alike; more matches agree on the half-turn, but
+    they weigh little (ends with near twins in their clouds), while the fewer matches
+    of the truth weigh fully: by count the half-turn stays, by weight the truth wins."""
+    source, target = _box(1500, 1), _box(1400, 2)
+    turn = np.diag([-1.0, -1.0, 1.0, 1.0])
+    context = RegistrationContext(source, target)
+    tree = cKDTree(source)
+    rng = np.random.default_rng(3)
+    wrong_t = rng.choice(len(target), 60, replace=False)
+    right_t = rng.choice(np.setdiff1d(np.arange(len(target)), wrong_t), 30, replace=False)
+    wrong_s = tree.query(target[wrong_t] @ turn[:3, :3].T)[1]  # the half-turn's partners
+    right_s = tree.query(target[right_t])[1]
+    matched = (
+        np.r_[source[wrong_s], source[right_s]] - context.origin,
+        np.r_[target[wrong_t], target[right_t]] - context.origin,
+    )
+    local = np.stack([context.to_local(turn), context.to_local(np.eye(4))])
+    plain = verify(context, local, 0.05, matched)
+    assert plain.best == 0  # the count keeps the half-turn
+    weights = np.r_[np.full(60, 0.1), np.ones(30)]
+    weighted = verify(context, local, 0.05, matched, weights)
+    assert weighted.best == 1 and weighted.scores[1] > 1.3 * weighted.scores[0]
+    assert rotation_error_deg(context.to_world(weighted.refined[1]), np.eye(4)) < 2.0
+    assert match_support(matched, local[0], 0.05, weights) == pytest.approx(
+        0.1 * match_support((matched[0][:60], matched[1][:60]), local[0], 0.05), rel=0.05
+    )
+
+
+def test_distinct_weights_rank_each_match_by_its_less_distinct_end():
+    from o3d_rpointhop.registration.correspondences import (
+        distinct_weights,
+        distinctiveness,
+        most_distinct,
+        salient,
+    )
+
+    source_score = np.array([0.1, 0.5, 0.9, 0.3])  # ranks 1..4 of 4: 0.25, 0.75, 1, 0.5
+    target_score = np.array([2.0, 1.0])  # ranks: 1.0, 0.5
+    pairs = np.array([[2, 0], [2, 1], [0, 0], [1, 0]])
+    np.testing.assert_allclose(
+        distinct_weights(source_score, target_score, pairs), [1.0, 0.5, 0.25, 0.75]
+    )
+    features = np.random.default_rng(0).normal(size=(200, 8))
+    features[:50] = features[0] + 1e-3 * features[:50]  # fifty near twins
+    score = distinctiveness(features)
+    np.testing.assert_array_equal(most_distinct(score, 0.6), salient(features, 0.6))
+    weights = distinct_weights(score, score, np.c_[np.arange(200), np.arange(200)])
+    assert weights[:50].max() < weights[50:].min() and weights.max() == 1.0
+
+
+def test_the_context_computes_a_cloud_s_distinctiveness_once():
+    from o3d_rpointhop.registration.correspondences import distinctiveness
+
+    source, target, _, _, descriptor, _ = _planted_pair()
+    context = RegistrationContext(source, target, descriptor=descriptor)
+    first = context.distinctiveness(None, "source")
+    assert context.distinctiveness(descriptor, "source") is first  # the context's own
+    np.testing.assert_array_equal(first, distinctiveness(context.features(None, "source")))
+    other = context.distinctiveness(None, "target")
+    assert other is not first and len(other) == len(context.features(None, "target"))
