@@ -43,7 +43,7 @@ def _scores(seen: dict, truth: np.ndarray) -> tuple[float, float]:
     chosen hypothesis, in the frame the step worked in."""
     context = seen["context"]
     stack = np.concatenate([seen["hypotheses"], context.to_local(truth)[None]])
-    check = _hypotheses.verify(context, stack, seen["distance"], seen["matched"], seen["weights"])
+    check = _hypotheses.verify(context, stack, seen["distance"], seen["matched"])
     return float(check.scores[-1]), float(check.scores[seen["chosen"]])
 
 
@@ -61,14 +61,13 @@ def main() -> None:
     seen: dict = {}
     verify = _hypotheses.verify
 
-    def spy(context, hypotheses, distance, matched, weights=None):
-        check = verify(context, hypotheses, distance, matched, weights)
+    def spy(context, hypotheses, distance, matched):
+        check = verify(context, hypotheses, distance, matched)
         seen.update(
             context=context,
             hypotheses=hypotheses,
             distance=distance,
             matched=matched,
-            weights=weights,
             chosen=check.best,
         )
         return check

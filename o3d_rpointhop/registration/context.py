@@ -20,7 +20,6 @@ from .._utils.validation import as_viewpoints
 from ..open3d_interop import to_point_cloud
 from ..transforms import from_centred
 from .checks import check_geometry
-from .correspondences import distinctiveness
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
 from .prepared import PreparedCloud, describe_global, estimate_normals, prepare_cloud
 from .result import StepResult
@@ -146,10 +145,8 @@ class RegistrationContext:
         self.n_global_points = resolve_global_points(n_global_points, descriptor)
         self._global: dict[str, o3d.geometry.PointCloud] = {}
         self.descriptor = descriptor
-        # Descriptors by (descriptor id, or _OWN for the context's own, which), and their
-        # distinctiveness within each cloud by the same keys.
+        # Descriptors by (descriptor id, or _OWN for the context's own, which).
         self._features: dict[tuple[Any, str], np.ndarray] = {}
-        self._distinct: dict[tuple[Any, str], np.ndarray] = {}
         if prepared is None:
             voxel, self.downsampled = resolve_voxel_size(
                 self.source, self.target, voxel_size, self.n_global_points
@@ -250,7 +247,7 @@ class RegistrationContext:
         the context's: its prepared descriptors when it was given them, else the
         context's ``descriptor`` (the default one when that is None)."""
         own = descriptor is None or descriptor is self.descriptor
-        key = self._key(descriptor, which)
+        key = (_OWN if own else id(descriptor), which)
         if key not in self._features:
             if own:
                 if self.descriptor is None:
@@ -272,21 +269,6 @@ class RegistrationContext:
                     f"cannot describe the {which} cloud, {len(cloud.points)} points{detail}: {exc}"
                 ) from exc
         return self._features[key]
-
-    def distinctiveness(self, descriptor: Any, which: str) -> np.ndarray:
-        """How distinct each global point's descriptor (:meth:`features`) is within its
-        own cloud (:func:`~o3d_rpointhop.registration.correspondences.distinctiveness`),
-        computed once per descriptor and cloud: salient matches and the verification's
-        weights read the same numbers."""
-        key = self._key(descriptor, which)
-        if key not in self._distinct:
-            self._distinct[key] = distinctiveness(self.features(descriptor, which))
-        return self._distinct[key]
-
-    def _key(self, descriptor: Any, which: str) -> tuple[Any, str]:
-        """The cache key of ``descriptor``'s values on cloud ``which``."""
-        own = descriptor is None or descriptor is self.descriptor
-        return (_OWN if own else id(descriptor), which)
 
     def with_normals(self, cloud: o3d.geometry.PointCloud, which: str, radius: float):
         """``cloud`` with normals: its own if it has them, else estimated (and cached)."""

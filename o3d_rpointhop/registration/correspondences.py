@@ -16,11 +16,9 @@ __all__ = [
     "SALIENT_NEIGHBOURS",
     "Correspondences",
     "count_of",
-    "distinct_weights",
     "distinctiveness",
     "find_correspondences",
     "k_best_correspondences",
-    "most_distinct",
     "nearest_descriptors",
     "salient",
 ]
@@ -358,33 +356,7 @@ def salient(features: np.ndarray, share: float, k: int = SALIENT_NEIGHBOURS) -> 
     """
     if not 0.0 < share <= 1.0:
         raise ValueError(f"share must be in (0, 1], got {share}")
-    return most_distinct(distinctiveness(features, k), share)
-
-
-def most_distinct(score: np.ndarray, share: float) -> np.ndarray:
-    """Which of the points scored by ``score`` (:func:`distinctiveness`) are among the
-    ``share`` most distinct: :func:`salient` on scores computed already."""
+    score = distinctiveness(features, k)
     keep = np.zeros(len(score), dtype=bool)
     keep[np.argsort(-score, kind="stable")[: int(np.ceil(share * len(score)))]] = True
     return keep
-
-
-def distinct_weights(
-    source_score: np.ndarray, target_score: np.ndarray, pairs: np.ndarray
-) -> np.ndarray:
-    """A weight in (0, 1] per match ``pairs`` (source index, target index): the rank of
-    its less distinct end within that end's cloud (by ``*_score``, from
-    :func:`distinctiveness`), as a share of the cloud, 1 for the most distinct point.
-    A match between two points of a wall weighs little, whichever wall; one whose two
-    ends are each rare in their own cloud weighs nearly 1.
-
-    Returns
-    -------
-    ndarray of shape (len(pairs),)
-    """
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    ranks = [
-        (np.argsort(np.argsort(np.asarray(score), kind="stable"), kind="stable") + 1.0) / len(score)
-        for score in (source_score, target_score)
-    ]
-    return np.minimum(ranks[0][pairs[:, 0]], ranks[1][pairs[:, 1]])

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..._utils.params import HasMethods, Interval
 from ..context import RegistrationContext
-from ..correspondences import Correspondences, distinct_weights, find_correspondences
+from ..correspondences import Correspondences, find_correspondences
 from ..result import StepResult
 from ._base import RegistrationStep
 from ._hypotheses import verify
@@ -76,18 +76,12 @@ class GlobalStep(RegistrationStep):
         """The estimate the step returns, and what its choice reports: with several
         hypotheses (best first, ``estimate`` the first), the winner of their
         verification (:func:`~._hypotheses.verify`, against the step's matches
-        ``corr``, each weighted by how distinct its two ends are in their clouds) as the
-        step estimated it (the short ICP only scores it: the steps
+        ``corr``) as the step estimated it (the short ICP only scores it: the steps
         after it refine; the step's own choice, kept, is the result ``n_hypotheses=1``
         gives); else ``estimate``."""
         if len(hypotheses) < 2:
             return estimate, {}
-        weights = distinct_weights(
-            context.distinctiveness(self.descriptor, "source"),
-            context.distinctiveness(self.descriptor, "target"),
-            corr.pairs,
-        )
-        check = verify(context, hypotheses, distance, self._matched(context, corr), weights)
+        check = verify(context, hypotheses, distance, GlobalStep._matched(context, corr))
         info = {
             "hypothesis_scores": [round(float(s), 6) for s in check.scores],
             "chosen_hypothesis": check.best,

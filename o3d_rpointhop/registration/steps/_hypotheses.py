@@ -147,34 +147,25 @@ def overlap_score(
 
 
 def match_support(
-    matched: tuple[np.ndarray, np.ndarray],
-    transformation: np.ndarray,
-    distance: float,
-    weights: np.ndarray | None = None,
+    matched: tuple[np.ndarray, np.ndarray], transformation: np.ndarray, distance: float
 ) -> float:
     """The step's matches ``(source points, target points)`` that ``transformation``
     explains, each counted by the truncated quadratic of its residual within
-    ``distance`` (what the step itself ranks by), times its weight when ``weights``
-    (one per match) are given."""
+    ``distance``: what the step itself ranks by."""
     a, b = matched
     r2 = ((a @ transformation[:3, :3].T + transformation[:3, 3] - b) ** 2).sum(axis=1)
-    explained = np.clip(1.0 - r2 / (distance * distance), 0.0, None)
-    return float(explained.sum() if weights is None else explained @ weights)
+    return float(np.clip(1.0 - r2 / (distance * distance), 0.0, None).sum())
 
 
 def verify(
-    context,
-    hypotheses: np.ndarray,
-    distance: float,
-    matched: tuple[np.ndarray, np.ndarray],
-    weights: np.ndarray | None = None,
+    context, hypotheses: np.ndarray, distance: float, matched: tuple[np.ndarray, np.ndarray]
 ) -> Verification:
     """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
     global clouds within ``distance`` and score it by its :func:`overlap_score` (with
-    normals) times its :func:`match_support` (weighted by ``weights``): the clouds must
-    meet where the pose puts them, and the matches must agree with it. The best score
-    wins if it beats the first hypothesis's (the step's own choice) by more than
-    :data:`SWITCH_MARGIN`; else the first stays.
+    normals) times its :func:`match_support`: the clouds must meet where the pose puts
+    them, and the matches must agree with it. The best score wins if it beats the first
+    hypothesis's (the step's own choice) by more than :data:`SWITCH_MARGIN`; else the
+    first stays.
 
     Parameters
     ----------
@@ -185,10 +176,6 @@ def verify(
         The step's inlier distance: the ICP's correspondence distance and the score's.
     matched : (ndarray, ndarray)
         The step's matched source and target points (centred frame), row by row.
-    weights : ndarray of shape (len(matched[0]),), default=None
-        What each match counts for (the global steps give
-        :func:`~o3d_rpointhop.registration.correspondences.distinct_weights`); None:
-        each counts 1.
 
     Returns
     -------
@@ -212,7 +199,7 @@ def verify(
     scores = np.array(
         [
             overlap_score(source, target, t, distance, normals, grids)
-            * match_support(matched, t, distance, weights)
+            * match_support(matched, t, distance)
             for t in refined
         ]
     )

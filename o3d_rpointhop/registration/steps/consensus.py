@@ -15,7 +15,7 @@ from ..correspondences import (
     Correspondences,
     find_correspondences,
     k_best_correspondences,
-    most_distinct,
+    salient,
 )
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
@@ -230,12 +230,9 @@ class ConsensusGlobal(GlobalStep):
     def _between_salient(self, context: RegistrationContext, corr: Correspondences):
         """The matches whose two points are both among the ``salient_share`` most
         distinct of their cloud (:func:`~o3d_rpointhop.registration.correspondences.salient`)."""
+        src, tgt = self._describe(context)
         share = float(self.salient_share)
-        source, target = (
-            most_distinct(context.distinctiveness(self.descriptor, which), share)
-            for which in ("source", "target")
-        )
-        keep = source[corr.pairs[:, 0]] & target[corr.pairs[:, 1]]
+        keep = salient(src, share)[corr.pairs[:, 0]] & salient(tgt, share)[corr.pairs[:, 1]]
         self._enough(
             int(keep.sum()), "matches join two salient points", f"raise salient_share={share}"
         )
