@@ -359,3 +359,58 @@ def test_reconstruct_writes_several_trajectories_in_one_run(tmp_path):
     assert record == summary["provenance"]
     bad = args[:-4] + ["--trajectory-format", "tum"]  # three files, two formats
     assert main(bad) == 2
+
+
+def test_pose_files_that_say_too_little_or_too_much_get_one_clear_line(tmp_path):
+    """Empty and cut files, counts that do not match, a .log into several scans, a
+    missing file and an unknown format: each refused with what is wrong."""
+    from o3d_rpointhop.poses import log_records, read_trajectory, write_trajectory
+
+    (tmp_path / "empty.txt").write_text("# only a comment\n\n")
+    for format in ("kitti", "tum"):
+        with pytest.raises(ValueError, match="no poses in this file"):
+            read_poses(tmp_path / "empty.txt", format)
+    (tmp_path / "none.txt").write_text(" ".join(["nan"] * 12) + "\n")
+    with pytest.raises(ValueError, match="only scans without one"):
+        read_poses(tmp_path / "none.txt", "kitti")
+    write_poses(tmp_path / "a.log", POSES[:2], "3dmatch")
+    lines = (tmp_path / "a.log").read_text().splitlines()
+    (tmp_path / "cut.log").write_text("\n".join(lines[:-1]) + "\n")
+    with pytest.raises(ValueError, match="expected records of 5 lines, got 9 lines"):
+        log_records(tmp_path / "cut.log", 4)
+    with pytest.raises(ValueError, match="3 timestamps for 2 poses"):
+        write_poses(tmp_path / "t.txt", POSES[:2], "tum", timestamps=[0.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match="1 pairs for 2 poses"):
+        write_poses(tmp_path / "p.log", POSES[:2], "3dmatch", pairs=[(0, 1)])
+    write_poses(tmp_path / "two.log", POSES[:2], "3dmatch", pairs=[(0, 1), (2, 3)])
+    with pytest.raises(ValueError, match=r"records into several scans \(\[0, 2\]\)"):
+        read_trajectory(tmp_path / "two.log", "3dmatch")
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_poses(tmp_path / "nowhere.txt")
+    for bad in (
+        lambda: read_poses(tmp_path / "a.log", "g2o"),
+        lambda: read_trajectory(tmp_path / "a.log", "g2o"),
+        lambda: write_poses(tmp_path / "x.txt", POSES, "g2o"),
+    ):
+        with pytest.raises(ValueError, match="format must be one of"):
+            bad()
+    # TUM timestamps that are not scan numbers: the poses in file order.
+    write_poses(tmp_path / "s.txt", POSES[:3], "tum", timestamps=[0.5, 1.25, 3.0])
+    back = read_trajectory(tmp_path / "s.txt", "tum")
+    assert len(back) == 3 and all(p is not None for p in back)
+    np.testing.assert_allclose(back[1], POSES[1], atol=1e-6)
+    write_trajectory(tmp_path / "k.txt", [POSES[0], None, POSES[2]], "kitti")
+    assert read_trajectory(tmp_path / "k.txt", "kitti", n_scans=5)[3:] == [None, None]
+    with pytest.raises(ValueError, match="poses of more than 2 scans"):
+        read_trajectory(tmp_path / "k.txt", "kitti", n_scans=2)
+
+
+def test_pose_graph_files_are_json_and_hold_nodes(tmp_path):
+    graph = o3d.pipelines.registration.PoseGraph()
+    with pytest.raises(ValueError, match="Open3D writes pose graphs as .json files"):
+        write_pose_graph(tmp_path / "g.txt", graph)
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_pose_graph(tmp_path / "nowhere.json")
+    write_pose_graph(tmp_path / "empty.json", graph)
+    with pytest.raises(ValueError, match="no pose graph nodes"):
+        read_pose_graph(tmp_path / "empty.json")
