@@ -384,3 +384,50 @@ def test_evaluate_at_survey_coordinates_reports_the_data_s_error(tmp_path, capsy
     assert summary["rms_displacement"] == pytest.approx(expected_rms, rel=1e-3)
     assert summary["rms_displacement"] < angle * spread.max() < 1e-3
     assert np.linalg.norm(estimate[:3, 3] - truth[:3, 3]) > 10.0  # what the origin would say
+
+
+def test_register_takes_sensor_positions_and_an_up_axis(tmp_path, capsys):
+    """--viewpoints as one position per cloud (each in its own coordinates) and --up as
+    a direction reach register(): the same estimate as the library's with them."""
+    from o3d_rpointhop import register
+
+    src, tgt, truth = moved_pair_files(tmp_path)
+    views = "0,0,3;0.2,-0.1,3.3"
+    assert main(["register", src, tgt, "--json", "--viewpoints", views, "--up", "0,0,1"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    estimate = np.array(result["transformation"])
+    assert np.abs(estimate - truth).max() < 0.02
+    library = register(
+        read_cloud(src),
+        read_cloud(tgt),
+        viewpoints=([0, 0, 3.0], [0.2, -0.1, 3.3]),
+        up=[0, 0, 1.0],
+    )
+    np.testing.assert_allclose(estimate, library.transformation, atol=1e-9)
+    for option, value in (("--viewpoints", "0,0;1,1,1"), ("--up", "0,0"), ("--up", "x,y,z")):
+        with pytest.raises(SystemExit) as exc:
+            main(["register", src, tgt, option, value])
+        assert exc.value.code == 2
+        assert "expected" in capsys.readouterr().err
+
+
+def test_register_exits_3_and_says_so_when_the_result_is_ambiguous(tmp_path, capsys):
+    """A box and the same box sampled again: its half-turn fits as well, so the command
+    exits 3 with the warning, and the JSON says ambiguous."""
+    from o3d_rpointhop.cli import EXIT_UNRELIABLE
+
+    rng = np.random.default_rng(0)
+    half = np.array([1.0, 0.5, 0.25])
+
+    def box(n):
+        points = rng.uniform(-half, half, (n, 3))
+        axis = rng.integers(0, 3, n)
+        points[np.arange(n), axis] = half[axis] * rng.choice([-1.0, 1.0], n)
+        return points
+
+    src = write_points(tmp_path / "a.ply", box(1500))
+    tgt = write_points(tmp_path / "b.ply", box(1500))
+    assert main(["register", src, tgt, "--json"]) == EXIT_UNRELIABLE
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["ambiguous"] is True
+    assert "ambiguous" in captured.err
