@@ -62,3 +62,13 @@ def test_benchmark_command_rejects_bad_choices(capsys):
 
     assert main(["benchmark", "3dmatch", "--protocol", "x"]) == 1
     assert "no protocols" in capsys.readouterr().err
+    # Options of one benchmark given to another, and objects the scan-set benchmark
+    # does not have: refused before any data is read.
+    for args, message in (
+        (["benchmark", "modelnet40", "--rotate"], "--rotate applies to 3dmatch"),
+        (["benchmark", "bunny", "--with-consecutive"], "apply to 3dmatch"),
+        (["benchmark", "modelnet40", "--viewpoints", "none"], "apply to 3dmatch"),
+        (["benchmark", "multiway", "--protocol", "teapot"], "multiway objects are"),
+    ):
+        assert main([*args, "--data", "/nowhere"]) == 1, args
+        assert message in capsys.readouterr().err, args
