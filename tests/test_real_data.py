@@ -207,8 +207,9 @@ def test_bunny_benchmark_places_every_scan_sharing_a_fifth_with_bun000(shared_da
 @pytest.mark.slow
 def test_multiway_benchmark_rebuilds_the_dragon_and_reports_it(shared_data, tmp_path):
     """The scan-set benchmark on the dragon's 7 scans, each moved by a random motion
-    from its pose in dragonStandRight.conf: every scan placed within 2 deg and 2 mm (docs/multiway.md), the report's
-    rows, the times kept apart, and the reconstruction drawn."""
+    from its pose in dragonStandRight.conf: every scan placed within 2 deg and 2 mm
+    (docs/multiway.md), the report's rows, the times kept apart, and the reconstruction
+    drawn."""
     pytest.importorskip("matplotlib")
     from o3d_rpointhop.evaluation.multiway import (
         markdown,
