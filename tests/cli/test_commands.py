@@ -415,18 +415,12 @@ def test_register_exits_3_and_says_so_when_the_result_is_ambiguous(tmp_path, cap
     """A box and the same box sampled again: its half-turn fits as well, so the command
     exits 3 with the warning, and the JSON says ambiguous."""
     from o3d_rpointhop.cli import EXIT_UNRELIABLE
+    from o3d_rpointhop.datasets.synthetic import _box_surface
 
     rng = np.random.default_rng(0)
     half = np.array([1.0, 0.5, 0.25])
-
-    def box(n):
-        points = rng.uniform(-half, half, (n, 3))
-        axis = rng.integers(0, 3, n)
-        points[np.arange(n), axis] = half[axis] * rng.choice([-1.0, 1.0], n)
-        return points
-
-    src = write_points(tmp_path / "a.ply", box(1500))
-    tgt = write_points(tmp_path / "b.ply", box(1500))
+    src = write_points(tmp_path / "a.ply", _box_surface(rng, 1500, half))
+    tgt = write_points(tmp_path / "b.ply", _box_surface(rng, 1500, half))
     assert main(["register", src, tgt, "--json"]) == EXIT_UNRELIABLE
     captured = capsys.readouterr()
     assert json.loads(captured.out)["ambiguous"] is True
