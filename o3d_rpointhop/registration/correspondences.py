@@ -55,6 +55,10 @@ class Correspondences:
     def __len__(self) -> int:
         return len(self.pairs)
 
+    def rows(self, index: np.ndarray) -> Correspondences:
+        """The matches ``index`` selects (a boolean mask or row indices), in its order."""
+        return Correspondences(self.pairs[index], self.distances[index], self.ratios[index])
+
     def __array__(self, dtype=None, copy=None):
         return self.pairs if dtype is None else self.pairs.astype(dtype)
 

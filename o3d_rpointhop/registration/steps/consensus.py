@@ -211,12 +211,13 @@ class ConsensusGlobal(GlobalStep):
                 if self.n_nearest > 1
                 else find_correspondences(tgt, src, **filters)
             )
-            pairs = np.concatenate([corr.pairs, back.pairs[:, ::-1]])
-            distances = np.concatenate([corr.distances, back.distances])
-            ratios = np.concatenate([corr.ratios, back.ratios])
-            _, first = np.unique(pairs, axis=0, return_index=True)
-            first = np.sort(first)
-            corr = Correspondences(pairs[first], distances[first], ratios[first])
+            both = Correspondences(
+                np.concatenate([corr.pairs, back.pairs[:, ::-1]]),
+                np.concatenate([corr.distances, back.distances]),
+                np.concatenate([corr.ratios, back.ratios]),
+            )
+            _, first = np.unique(both.pairs, axis=0, return_index=True)
+            corr = both.rows(np.sort(first))
         if self.salient_share is not None:
             corr = self._between_salient(context, corr)
         if len(corr) > self.max_matches:
@@ -224,7 +225,7 @@ class ConsensusGlobal(GlobalStep):
                 keep = np.sort(np.argsort(corr.distances, kind="stable")[: self.max_matches])
             else:  # evenly by index: no region is favoured for its similar descriptors
                 keep = np.unique(np.linspace(0, len(corr) - 1, self.max_matches).astype(np.int64))
-            corr = Correspondences(corr.pairs[keep], corr.distances[keep], corr.ratios[keep])
+            corr = corr.rows(keep)
         return corr
 
     def _between_salient(self, context: RegistrationContext, corr: Correspondences):
@@ -236,7 +237,7 @@ class ConsensusGlobal(GlobalStep):
         self._enough(
             int(keep.sum()), "matches join two salient points", f"raise salient_share={share}"
         )
-        return Correspondences(corr.pairs[keep], corr.distances[keep], corr.ratios[keep])
+        return corr.rows(keep)
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         settings = context.settings
