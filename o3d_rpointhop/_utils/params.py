@@ -1,6 +1,6 @@
 """The one import of scikit-learn's parameter validation.
 
-``Interval``, ``StrOptions``, ``HasMethods`` and ``validate_params`` are what every
+``Interval``, ``Options``, ``StrOptions``, ``HasMethods`` and ``validate_params`` are what every
 scikit-learn estimator checks its parameters with, and what makes ours answer a bad
 value as scikit-learn's do (``InvalidParameterError``, a ``ValueError``). They live in
 the private ``sklearn.utils._param_validation``; importing them here, and only here,
@@ -14,11 +14,19 @@ from sklearn.utils._param_validation import (
     HasMethods,
     Interval,
     InvalidParameterError,
+    Options,
     StrOptions,
 )
 from sklearn.utils._param_validation import validate_params as _validate_params
 
-__all__ = ["HasMethods", "Interval", "InvalidParameterError", "StrOptions", "validate_params"]
+__all__ = [
+    "HasMethods",
+    "Interval",
+    "InvalidParameterError",
+    "Options",
+    "StrOptions",
+    "validate_params",
+]
 
 _Function = TypeVar("_Function", bound=Callable[..., Any])
 

@@ -15,13 +15,21 @@ from sklearn.base import _fit_context
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
+from .._utils.parallel import map_clouds
 from .._utils.params import Interval, StrOptions
 from .._utils.threads import kernel_threads
 from .._utils.validation import as_cloud_list, as_viewpoints
 from ._base import BaseDescriptor
 from ._persistence import load_model, save_model
 from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS, pretrained_path
-from .pointhop import POOLINGS, SAMPLING_METHODS, HopConfig, HopTree, cloud_frames
+from .pointhop import (
+    N_TURNS_ALLOWED,
+    POOLINGS,
+    SAMPLING_METHODS,
+    HopConfig,
+    HopTree,
+    cloud_frames,
+)
 
 __all__ = ["RPointHopTransformer"]
 
@@ -351,6 +359,73 @@ class RPointHopTransformer(BaseDescriptor):
             n_threads=kernel_threads(self.n_jobs),
             progress=self.progress,
             viewpoint=viewpoint,
+        )
+
+    def transform_turns(
+        self, X: Any, n_turns: int = 4, viewpoints: Any = None
+    ) -> np.ndarray | list[np.ndarray]:
+        """Describe every point under its local frame and that frame turned about its
+        normal axis.
+
+        A frame's normal axis repeats between two scans far more often than its in-plane
+        axes (on walls and floors the two largest spreads are nearly equal, and the
+        first axis's sign is a matter of sampling): at true correspondences of 3DMatch
+        training pairs the whole frame agrees within 25 degrees at 18 %, up to a half
+        turn at 31 % and up to a quarter turn at 46 %. Matching a point's descriptor
+        against every turn of the other cloud's (``ConsensusGlobal(frame_turns=...)``)
+        lets those correspondences match. The turns reuse the frames and neighbours:
+        each costs one more Saab projection, not a description.
+
+        Parameters
+        ----------
+        X : point cloud(s)
+            As in :meth:`transform`.
+        n_turns : {1, 2, 4}, default=4
+            1: the descriptors alone; 2: also under the frames turned by a half turn;
+            4: under every quarter turn.
+        viewpoints : None, "origin" or positions, default=None
+            As in :meth:`transform`.
+
+        Returns
+        -------
+        descriptors : ndarray of shape (n_turns, n_points, n_features_out_), or a list
+            or stack of them as :meth:`transform` answers
+            Turn ``t`` is the frames turned by ``t * 4 / n_turns`` quarter turns
+            (``x' = y, y' = -x`` per quarter); turn 0 equals :meth:`transform`'s
+            output. Octants are relabelled, not recomputed: a neighbour on a frame
+            plane (the point itself) moves with its octant.
+
+        Raises
+        ------
+        ValueError
+            If ``n_turns`` is not 1, 2 or 4, or the model pools by azimuth (whose
+            bins do not change with a turn).
+        """
+        if n_turns not in N_TURNS_ALLOWED or isinstance(n_turns, bool):
+            raise ValueError(f"n_turns must be one of {N_TURNS_ALLOWED}, got {n_turns!r}")
+        config = self._check_transform()
+        if config.pooling == "azimuth" and n_turns > 1:
+            raise ValueError(
+                "pooling='azimuth' describes without the frames' in-plane axes: its "
+                "descriptors are the same under every turn; use n_turns=1"
+            )
+        clouds, kind = as_cloud_list(X)
+        views = as_viewpoints(viewpoints, len(clouds))
+        extras = self._per_cloud(X, clouds, kind, config)
+        turns = [int(n_turns)] * len(clouds)
+        return map_clouds(self._describe_turns, clouds, kind, self.n_jobs, extras, views, turns)
+
+    def _describe_turns(
+        self, points: np.ndarray, config: HopConfig, viewpoint, n_turns: int
+    ) -> np.ndarray:
+        return self._tree().describe(
+            points,
+            config,
+            n_components=self.n_components,
+            n_threads=kernel_threads(self.n_jobs),
+            progress=self.progress,
+            viewpoint=viewpoint,
+            n_turns=n_turns,
         )
 
     def local_frames(self, X: Any, viewpoints: Any = None) -> np.ndarray | list[np.ndarray]:

@@ -172,6 +172,22 @@ def consensus_salient_3_hypotheses():
     return ConsensusGlobal(salient_share=0.75, n_hypotheses=3)
 
 
+def consensus_turns():
+    """The consensus on matches over every quarter turn of the local frames."""
+    return ConsensusGlobal(frame_turns=4)
+
+
+def consensus_half_turns():
+    """The consensus on matches over the local frames and their half turns."""
+    return ConsensusGlobal(frame_turns=2)
+
+
+def consensus_turns_salient():
+    """The consensus on matches over every quarter turn of the local frames, between
+    salient points (the 75 % most distinct of each cloud)."""
+    return ConsensusGlobal(frame_turns=4, salient_share=0.75)
+
+
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
     ``global_method`` makes a fresh step per pair): it returns the whole result (the
@@ -321,6 +337,31 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, 8192 global points, consensus on matches between "
         "salient points (salient_share=0.75) + point-to-plane ICP",
         _register_with(global_method=consensus_salient, n_global_points=8192),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-turns",
+        "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
+        "of the local frames (frame_turns=4) + point-to-plane ICP",
+        _register_with(global_method=consensus_turns),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-half-turns",
+        "R-PointHop, shipped scene model, consensus on matches over the local frames and "
+        "their half turns (frame_turns=2) + point-to-plane ICP",
+        _register_with(global_method=consensus_half_turns),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-turns-salient",
+        "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
+        "of the local frames between salient points (frame_turns=4, salient_share=0.75) "
+        "+ point-to-plane ICP",
+        _register_with(global_method=consensus_turns_salient),
         datasets=_SCENES,
         model="scene",
     ),

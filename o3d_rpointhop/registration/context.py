@@ -157,7 +157,7 @@ class RegistrationContext:
                     raise TypeError(f"prepared clouds must be PreparedCloud, got {type(scan)}")
                 self._global[which] = _as_open3d(scan, f"prepared {which}").translate(-self.origin)
                 if scan.features is not None:
-                    self._features[(_OWN, which)] = scan.features
+                    self._features[(_OWN, which, 1)] = scan.features
             voxel, self.downsampled = voxel_size, True
             if voxel == "auto":
                 voxel = max(point_spacing(np.asarray(c.points)) for c in self._global.values())
@@ -195,8 +195,8 @@ class RegistrationContext:
     def prepare(self, descriptors: Any = ()) -> float:
         """Prepare what the steps will share, before the first runs: both global clouds
         (:func:`~o3d_rpointhop.registration.prepared.prepare_cloud`) and their
-        descriptors by each of ``descriptors`` (``None``: the context's own; see
-        :meth:`features`). Idempotent.
+        descriptors by each ``(descriptor, n_turns)`` of ``descriptors`` (``None``: the
+        context's own; see :meth:`features`). Idempotent.
 
         Returns
         -------
@@ -206,9 +206,9 @@ class RegistrationContext:
         start = time.perf_counter()
         for which in ("source", "target"):
             self.global_cloud(which)
-        for descriptor in descriptors:
+        for descriptor, n_turns in descriptors:
             for which in ("source", "target"):
-                self.features(descriptor, which)
+                self.features(descriptor, which, n_turns)
         return time.perf_counter() - start
 
     def clouds(
@@ -240,14 +240,17 @@ class RegistrationContext:
             self._coarse.viewpoints, self._coarse.up = self.viewpoints, self.up
         return self._coarse
 
-    def features(self, descriptor: Any, which: str) -> np.ndarray:
+    def features(self, descriptor: Any, which: str, n_turns: int = 1) -> np.ndarray:
         """Descriptors of the global cloud, computed once per descriptor object, with the
         distances it leaves to the registration at its resolution (``at_resolution``)
         and with the viewpoints, if any. ``descriptor`` None (or the context's own) is
         the context's: its prepared descriptors when it was given them, else the
-        context's ``descriptor`` (the default one when that is None)."""
+        context's ``descriptor`` (the default one when that is None). ``n_turns`` above
+        1: ``(n_turns, n_points, width)``, the descriptors under each turn of the local
+        frames about their normals (the first, turn 0, is then also what ``n_turns=1``
+        answers)."""
         own = descriptor is None or descriptor is self.descriptor
-        key = (_OWN if own else id(descriptor), which)
+        key = (_OWN if own else id(descriptor), which, n_turns)
         if key not in self._features:
             if own:
                 if self.descriptor is None:
@@ -257,7 +260,7 @@ class RegistrationContext:
             view = None if self.viewpoints is None else self.viewpoints[which]
             try:
                 self._features[key] = describe_global(
-                    descriptor, cloud, self.voxel_size, self.settings, view
+                    descriptor, cloud, self.voxel_size, self.settings, view, n_turns
                 )
             except ValueError as exc:
                 detail = (
@@ -268,6 +271,8 @@ class RegistrationContext:
                 raise ValueError(
                     f"cannot describe the {which} cloud, {len(cloud.points)} points{detail}: {exc}"
                 ) from exc
+            if n_turns > 1:
+                self._features.setdefault(key[:2] + (1,), self._features[key][0])
         return self._features[key]
 
     def with_normals(self, cloud: o3d.geometry.PointCloud, which: str, radius: float):

@@ -21,6 +21,7 @@ __all__ = [
     "k_best_correspondences",
     "nearest_descriptors",
     "salient",
+    "turned_correspondences",
 ]
 
 #: The neighbour whose descriptor distance measures a point's distinctiveness: a point
@@ -325,6 +326,47 @@ def k_best_correspondences(source_features, target_features, k: int) -> Correspo
         pairs=np.c_[np.repeat(np.arange(len(src)), k), idx[:, :k].ravel()].astype(np.int64),
         distances=d.ravel(),
         ratios=ratio.ravel(),
+    )
+
+
+def turned_correspondences(source_features, target_turns) -> Correspondences:
+    """Match every source point to the target point one of whose turned descriptors is
+    nearest (``RPointHopTransformer.transform_turns``): where the two points' frames
+    agree only up to a turn about the normal, one of the target's turns matches.
+
+    Parameters
+    ----------
+    source_features : array-like of shape (n, d)
+        The source's descriptors (turn 0).
+    target_turns : array-like of shape (n_turns, m, d)
+        The target's descriptors under each turn of its frames.
+
+    Returns
+    -------
+    Correspondences
+        One match per source point, sorted by source index: the target point, the
+        smallest distance over its turns and the ratio of that distance to the
+        nearest one of any other target point (the ratio test's statistic).
+    """
+    turns = np.asarray(target_turns)
+    if turns.ndim != 3:
+        raise ValueError(f"target_turns must be (n_turns, m, d), got shape {turns.shape}")
+    n_turns, m = turns.shape[:2]
+    src, stacked = _feature_pair(source_features, turns.reshape(n_turns * m, -1))
+    # Among the n_turns + 1 nearest rows at least one is of another point (m >= 2).
+    idx, dist = nearest_descriptors(src, stacked, k=n_turns + 1)
+    point = idx % m
+    nearest = point[:, 0]
+    d1 = dist[:, 0]
+    other = point != nearest[:, None]
+    first_other = np.where(other.any(axis=1), other.argmax(axis=1), -1)
+    d2 = np.where(first_other >= 0, np.take_along_axis(dist, first_other[:, None], 1)[:, 0], np.inf)
+    ratio = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
+    ratio[(d2 == 0) & (d1 == 0)] = 1.0
+    return Correspondences(
+        pairs=np.c_[np.arange(len(src)), nearest].astype(np.int64),
+        distances=d1,
+        ratios=ratio,
     )
 
 

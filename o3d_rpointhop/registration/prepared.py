@@ -78,7 +78,12 @@ def estimate_normals(cloud: o3d.geometry.PointCloud, radius: float) -> None:
 
 
 def describe_global(
-    descriptor: Any, cloud: Any, voxel: float, settings: Any = None, viewpoint: Any = None
+    descriptor: Any,
+    cloud: Any,
+    voxel: float,
+    settings: Any = None,
+    viewpoint: Any = None,
+    n_turns: int = 1,
 ) -> np.ndarray:
     """A global cloud's descriptors as every registration computes them: with the
     distances the descriptor leaves to the registration bound to its resolution
@@ -86,15 +91,27 @@ def describe_global(
     ``viewpoint`` (the sensor position, in the cloud's coordinates) when given. The one
     route for a pair's context and for scans prepared once for many pairs.
 
+    With ``n_turns`` above 1, the descriptors under each turn of the local frames about
+    their normals (``transform_turns``), ``(n_turns, n_points, width)``.
+
     Raises
     ------
     TypeError
-        If a viewpoint is given to a descriptor whose ``transform`` takes none.
+        If a viewpoint is given to a descriptor whose ``transform`` takes none, or turns
+        to one without local frames.
     """
     import inspect
 
     at = getattr(descriptor, "at_resolution", None)
     bound = descriptor if at is None else at(voxel, settings)
+    if n_turns > 1:
+        if not hasattr(bound, "transform_turns"):
+            raise TypeError(
+                f"frame turns were asked for, but {type(bound).__name__} has no local "
+                "frames to turn (no transform_turns): use RPointHopTransformer, or "
+                "frame_turns=1"
+            )
+        return np.asarray(bound.transform_turns(cloud, n_turns, viewpoints=viewpoint))
     if viewpoint is None:
         return np.asarray(bound.transform(cloud))
     if "viewpoints" not in inspect.signature(bound.transform).parameters:

@@ -17,11 +17,12 @@ from joblib import Parallel, delayed, effective_n_jobs
 from ..._utils.progress import progress_bar
 from ..._utils.threads import kernel_threads, one_blas_thread
 from ._config import HopConfig
-from ._geometry import CloudGeometry, build_geometry
+from ._geometry import CloudGeometry, HopNeighbourhood, build_geometry
 from ._neighbors import spatial_order
 from ._octants import N_OCTANTS
 from ._pooling import folded_projection, matmul_blocks, pool, pool_project, pool_saab
 from ._saab import MomentAccumulator, apply_saab, fit_saab
+from ._turns import octant_turn, turn_hop1
 
 __all__ = ["HopTree"]
 
@@ -223,9 +224,7 @@ class HopTree:
         ``(n_queries, n_selected)``, the layout the next hop's pooling reads."""
         selected = self.selected[hop]
         if hop == 0:
-            attrs = _hop_inputs(0, geometry, None)
-            out = apply_saab(attrs, self.kernels[0], self.means[0])
-            return np.ascontiguousarray(out.reshape(-1, out.shape[2])[selected].T)
+            return self._first_hop(geometry.hop1_attributes)
         nb = geometry.hops[hop - 1]
         return pool_saab(
             previous,
@@ -236,6 +235,11 @@ class HopTree:
             selected,
             n_threads,
         )
+
+    def _first_hop(self, attributes: np.ndarray) -> np.ndarray:
+        """Hop 1's outputs that go on from its attributes ``(n_queries, hop1_dim)``."""
+        out = apply_saab(attributes.T[None].astype(np.float32), self.kernels[0], self.means[0])
+        return np.ascontiguousarray(out.reshape(-1, out.shape[2])[self.selected[0]].T)
 
     def forward(
         self,
@@ -268,11 +272,15 @@ class HopTree:
         n_threads: int = 1,
         progress: bool | None = None,
         viewpoint: np.ndarray | None = None,
+        n_turns: int | None = None,
     ) -> np.ndarray:
         """One descriptor row per point of a validated cloud, float32.
 
         ``viewpoint``: where the sensor stands, in the cloud's coordinates, or None
-        (see :func:`~._geometry.build_geometry`).
+        (see :func:`~._geometry.build_geometry`). ``n_turns``: also the descriptors
+        under every frame turned about its normal by ``4 / n_turns`` quarter turns
+        (:mod:`._turns`), stacked ``(n_turns, n_points, width)``, the first the
+        descriptors themselves; None gives ``(n_points, width)``.
 
         The cloud is described in a spatial order (:func:`~._neighbors.spatial_order`;
         the result does not depend on it beyond rounding). With ``n_components``, the
@@ -282,9 +290,14 @@ class HopTree:
         matrix products' blocks run on ``n_threads`` threads, and nothing else.
         """
         with one_blas_thread():
-            return self._describe(points, config, n_components, n_threads, progress, viewpoint)
+            out = self._describe(
+                points, config, n_components, n_threads, progress, viewpoint, n_turns or 1
+            )
+        return out[0] if n_turns is None else out
 
-    def _describe(self, points, config, n_components, n_threads, progress, viewpoint) -> np.ndarray:
+    def _describe(
+        self, points, config, n_components, n_threads, progress, viewpoint, n_turns
+    ) -> np.ndarray:
         projection = self.projection(n_components)
         bar = progress_bar(
             len(points),
@@ -301,15 +314,26 @@ class HopTree:
             bar.update(len(points) // 2)  # the geometry: about half of the time
         last = len(self.kernels) - 1
         n_out = self.n_full_features if projection is None else projection[1].shape[1]
-        out = np.empty((geometry.n_points, n_out), dtype=np.float32)
+        out = np.empty((n_turns, geometry.n_points, n_out), dtype=np.float32)
+        quarters = [4 * t // n_turns for t in range(n_turns)]
         if last == 0:
-            described = self.forward(geometry, n_threads=n_threads)
-            if projection is not None:
-                described = matmul_blocks(described - projection[0], projection[1], n_threads)
-            out[order] = described
+            attributes = geometry.hop1_attributes
+            for t, q in enumerate(quarters):
+                turned = attributes if q == 0 else turn_hop1(attributes, config.attributes, q)
+                described = self._first_hop(turned)
+                if projection is not None:
+                    described = matmul_blocks(described - projection[0], projection[1], n_threads)
+                out[t, order] = described
         else:
             previous = self.forward(geometry, last, n_threads, release=True)
-            self._last_hop(geometry, previous, projection, n_threads, out, order)
+            nb = geometry.hops[last - 1]
+            for t, q in enumerate(quarters):
+                # Deeper hops pool invariant features: a turn only relabels octants.
+                if q:
+                    geometry.hops[last - 1] = HopNeighbourhood(
+                        nb.neighbours, octant_turn(q)[nb.bins], nb.n_sources
+                    )
+                self._last_hop(geometry, previous, projection, n_threads, out[t], order)
         if bar is not None:
             bar.update(len(points) - len(points) // 2)
             bar.close()

@@ -61,9 +61,11 @@ class RegistrationStep(BaseEstimator):
         """Checks beyond the declarative constraints; nothing by default."""
 
     def _descriptors(self) -> tuple:
-        """The descriptors whose features the step will read (``None``: the context's
-        own): what the pipeline's preparation stage computes before the first step.
-        None by default."""
+        """The descriptors whose features the step will read, as ``(descriptor,
+        n_turns)`` (``None``: the context's own; ``n_turns`` as
+        :meth:`~o3d_rpointhop.registration.context.RegistrationContext.features`
+        takes it): what the pipeline's preparation stage computes before the first
+        step. None by default."""
         return ()
 
     def run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:

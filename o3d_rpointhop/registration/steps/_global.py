@@ -49,7 +49,11 @@ class GlobalStep(RegistrationStep):
     kind = "global"
 
     def _descriptors(self) -> tuple:
-        return (self.descriptor,)
+        return ((self.descriptor, self._n_turns()),)
+
+    def _n_turns(self) -> int:
+        """Turns of the local frames the step matches over (``frame_turns``; 1: none)."""
+        return int(getattr(self, "frame_turns", 1))
 
     def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
         # None: the context's descriptors (prepared, or its descriptor's).

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._utils.params import Interval, StrOptions
+from ..._utils.params import Interval, Options, StrOptions
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..correspondences import (
@@ -16,6 +16,7 @@ from ..correspondences import (
     find_correspondences,
     k_best_correspondences,
     salient,
+    turned_correspondences,
 )
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
@@ -80,6 +81,16 @@ class ConsensusGlobal(GlobalStep):
         floors and table tops, whose descriptors repeat, then stop drowning the few
         right matches of a pair that overlaps little. ``None``: every match
         (docs/registration.md, "Pairs that overlap little").
+    frame_turns : {1, 2, 4}, default=1
+        Match each point's descriptor against the other cloud's descriptors under
+        every turn of their local frames about the normal (a half turn for 2, every
+        quarter turn for 4; ``RPointHopTransformer.transform_turns``): a true
+        correspondence whose frames agree only up to such a turn (most of them on
+        walls and floors, where the in-plane axes are a matter of sampling) then
+        matches too. Needs a descriptor with local frames (R-PointHop); above 1 it
+        cannot be combined with ``mutual_filter``, ``max_ratio`` or ``n_nearest``.
+        Costs a projection per turn when describing and ``frame_turns`` times the
+        matching (docs/registration.md, "Frames that agree up to a turn").
     max_matches : int, default=8000
         Most matches the graph is built on; its two bit matrices take ``max_matches**2 /
         4`` bytes (16 MB at 8000).
@@ -130,6 +141,7 @@ class ConsensusGlobal(GlobalStep):
         "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
         "n_nearest": [Interval(Integral, 1, None, closed="left")],
         "salient_share": [None, Interval(Real, 0, 1, closed="right")],
+        "frame_turns": [Options(Integral, {1, 2, 4})],
         "max_matches": [Interval(Integral, 3, None, closed="left")],
         "cap": [StrOptions({"index", "distance"})],
         "score_distance": OPTIONAL_DISTANCE,
@@ -155,6 +167,7 @@ class ConsensusGlobal(GlobalStep):
         max_ratio: float | None = None,
         n_nearest: int = 1,
         salient_share: float | None = None,
+        frame_turns: int = 1,
         max_matches: int = 8000,
         cap: str = "index",
         score_distance: float | None = None,
@@ -176,6 +189,7 @@ class ConsensusGlobal(GlobalStep):
         self.max_ratio = max_ratio
         self.n_nearest = n_nearest
         self.salient_share = salient_share
+        self.frame_turns = frame_turns
         self.max_matches = max_matches
         self.cap = cap
         self.score_distance = score_distance
@@ -196,21 +210,37 @@ class ConsensusGlobal(GlobalStep):
                 "with mutual_filter or max_ratio (both are defined on the nearest "
                 "descriptor alone)"
             )
+        if self.frame_turns > 1 and (
+            self.mutual_filter or self.max_ratio is not None or self.n_nearest > 1
+        ):
+            raise ValueError(
+                f"{type(self).__name__}: frame_turns={self.frame_turns} cannot be "
+                "combined with mutual_filter, max_ratio or n_nearest > 1 (matches over "
+                "turns take each point's nearest turned descriptor alone)"
+            )
 
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
         filters = dict(mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
+        if self.frame_turns > 1:  # first: turn 0 is then the plain descriptors
+            src_turns, tgt_turns = (
+                context.features(self.descriptor, which, self.frame_turns)
+                for which in ("source", "target")
+            )
         src, tgt = self._describe(context)
-        if self.n_nearest > 1:
+        if self.frame_turns > 1:
+            corr = turned_correspondences(src, tgt_turns)
+        elif self.n_nearest > 1:
             corr = k_best_correspondences(src, tgt, self.n_nearest)
         else:
             corr = self._correspond(context, **filters)
         if self.both_directions and not self.mutual_filter:
-            back = (
-                k_best_correspondences(tgt, src, self.n_nearest)
-                if self.n_nearest > 1
-                else find_correspondences(tgt, src, **filters)
-            )
+            if self.frame_turns > 1:
+                back = turned_correspondences(tgt, src_turns)
+            elif self.n_nearest > 1:
+                back = k_best_correspondences(tgt, src, self.n_nearest)
+            else:
+                back = find_correspondences(tgt, src, **filters)
             both = Correspondences(
                 np.concatenate([corr.pairs, back.pairs[:, ::-1]]),
                 np.concatenate([corr.distances, back.distances]),
