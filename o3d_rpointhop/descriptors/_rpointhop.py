@@ -370,11 +370,12 @@ class RPointHopTransformer(BaseDescriptor):
         A frame's normal axis repeats between two scans far more often than its in-plane
         axes (on walls and floors the two largest spreads are nearly equal, and the
         first axis's sign is a matter of sampling): at true correspondences of 3DMatch
-        training pairs the whole frame agrees within 25 degrees at 18 %, up to a half
-        turn at 31 % and up to a quarter turn at 46 %. Matching a point's descriptor
-        against every turn of the other cloud's (``ConsensusGlobal(frame_turns=...)``)
-        lets those correspondences match. The turns reuse the frames and neighbours:
-        each costs one more Saab projection, not a description.
+        training pairs the whole frame agrees within 25 degrees at 17 %, up to a half
+        turn at 31 % and up to a quarter turn at 47 %. Matching a point's descriptor
+        against every turn of the other cloud's (``ConsensusGlobal(frame_turns=...)``,
+        ``RANSACGlobal(frame_turns=...)``) lets those correspondences match. The turns
+        reuse the frames and neighbours: each costs one more Saab projection (for a
+        multi-hop model, one more last hop), not a description.
 
         Parameters
         ----------
@@ -392,8 +393,9 @@ class RPointHopTransformer(BaseDescriptor):
             or stack of them as :meth:`transform` answers
             Turn ``t`` is the frames turned by ``t * 4 / n_turns`` quarter turns
             (``x' = y, y' = -x`` per quarter); turn 0 equals :meth:`transform`'s
-            output. Octants are relabelled, not recomputed: a neighbour on a frame
-            plane (the point itself) moves with its octant.
+            output. Octants are relabelled, not recomputed: a neighbour exactly on a
+            frame plane moves with its octant (recomputed, it would stay on the plane's
+            positive side).
 
         Raises
         ------
@@ -401,7 +403,11 @@ class RPointHopTransformer(BaseDescriptor):
             If ``n_turns`` is not 1, 2 or 4, or the model pools by azimuth (whose
             bins do not change with a turn).
         """
-        if n_turns not in N_TURNS_ALLOWED or isinstance(n_turns, bool):
+        if (
+            not isinstance(n_turns, Integral)
+            or isinstance(n_turns, bool)
+            or (n_turns not in N_TURNS_ALLOWED)
+        ):
             raise ValueError(f"n_turns must be one of {N_TURNS_ALLOWED}, got {n_turns!r}")
         config = self._check_transform()
         if config.pooling == "azimuth" and n_turns > 1:

@@ -136,7 +136,7 @@ def test_preparation_is_the_pipelines_first_stage(pretrained32):
     context = RegistrationContext(source, target, descriptor=counting)
     result = pipeline.run(context)
     assert counting.calls == 2 and seen["calls"] == 2
-    assert seen["features"] == [("own", "source"), ("own", "target")]
+    assert seen["features"] == [("own", "source", 1), ("own", "target", 1)]
     assert 0.0 < result.preparation_seconds < result.seconds
     assert result.as_dict()["preparation_seconds"] == result.preparation_seconds
 

@@ -13,9 +13,9 @@ A quarter turn (``x' = y``, ``y' = -x``) moves the neighbours of octant
 to octant ``(by, 1 - bx, bz)``, and turns every in-plane vector the same way; nothing
 else changes. So the turned descriptor is the same hops with their octants relabelled
 and, at hop 1, the in-plane components of the coordinates and normals turned; no
-neighbour search or frame is recomputed. A neighbour on a frame plane (the point itself,
-at offset 0) moves with its octant, where describing under a turned frame would keep it
-on the positive side (:mod:`._octants`).
+neighbour search or frame is recomputed. A neighbour exactly on a frame plane moves with
+its octant, where describing under a turned frame would keep it on the plane's positive
+side (:mod:`._octants`).
 """
 
 from __future__ import annotations

@@ -7,14 +7,22 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from ..._utils.params import HasMethods, Interval
+from ..._utils.params import HasMethods, Interval, Options
 from ..context import RegistrationContext
-from ..correspondences import Correspondences, find_correspondences
+from ..correspondences import Correspondences, find_correspondences, turned_correspondences
 from ..result import StepResult
 from ._base import RegistrationStep
 from ._hypotheses import verify
 
-__all__ = ["GlobalStep", "DESCRIPTOR", "COUNT", "HYPOTHESES", "N_HYPOTHESES_DOC"]
+__all__ = [
+    "COUNT",
+    "DESCRIPTOR",
+    "FRAME_TURNS",
+    "FRAME_TURNS_DOC",
+    "GlobalStep",
+    "HYPOTHESES",
+    "N_HYPOTHESES_DOC",
+]
 
 #: The constraint of a step's own descriptor: ``None`` (the pipeline's) or a transformer.
 DESCRIPTOR = [None, HasMethods(["transform"])]
@@ -22,6 +30,22 @@ DESCRIPTOR = [None, HasMethods(["transform"])]
 COUNT = [Interval(Integral, 3, None, closed="left"), Interval(Real, 0, 1, closed="right")]
 #: The constraint of a count of hypotheses verified by overlap.
 HYPOTHESES = [Interval(Integral, 1, None, closed="left")]
+
+#: The constraint of the turns of the local frames matched over.
+FRAME_TURNS = [Options(Integral, {1, 2, 4})]
+
+#: The docstring of ``frame_turns``, shared by the steps that have it.
+FRAME_TURNS_DOC = """frame_turns : {1, 2, 4}, default=1
+        Match each point's descriptor against the other cloud's descriptors under
+        every turn of their local frames about the normal (a half turn for 2, every
+        quarter turn for 4; ``RPointHopTransformer.transform_turns``): a true
+        correspondence whose frames agree only up to such a turn (on walls, floors
+        and other flat parts the in-plane axes are a matter of sampling) then
+        matches too. Needs a descriptor with local frames (R-PointHop); above 1 it
+        cannot be combined with ``mutual_filter`` or ``max_ratio`` (nor, for the
+        consensus, ``n_nearest``). Costs a Saab projection per turn when describing
+        and ``frame_turns`` times the matching (docs/registration.md, "Frames that
+        agree up to a turn")."""
 
 #: The docstring of ``n_hypotheses``, shared by the steps that have it.
 N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
@@ -54,6 +78,25 @@ class GlobalStep(RegistrationStep):
     def _n_turns(self) -> int:
         """Turns of the local frames the step matches over (``frame_turns``; 1: none)."""
         return int(getattr(self, "frame_turns", 1))
+
+    def _check_params(self) -> None:
+        if self._n_turns() > 1 and (
+            self.mutual_filter or self.max_ratio is not None or getattr(self, "n_nearest", 1) > 1
+        ):
+            raise ValueError(
+                f"{type(self).__name__}: frame_turns={self.frame_turns} cannot be "
+                "combined with mutual_filter, max_ratio or n_nearest > 1 (matches over "
+                "turns take each point's nearest turned descriptor alone)"
+            )
+
+    def _turned(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
+        """Both clouds' descriptors under every turn, ``(frame_turns, n, width)`` each
+        (computed before the plain ones, which are their turn 0)."""
+        n_turns = self._n_turns()
+        return (
+            context.features(self.descriptor, "source", n_turns),
+            context.features(self.descriptor, "target", n_turns),
+        )
 
     def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
         # None: the context's descriptors (prepared, or its descriptor's).
@@ -94,8 +137,14 @@ class GlobalStep(RegistrationStep):
         return hypotheses[check.best], info
 
     def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
-        src, tgt = self._describe(context)
-        corr = find_correspondences(src, tgt, **filters)
+        """Every source point's nearest target descriptor, filtered (``filters``), or
+        over every turn of the target's frames (``frame_turns``)."""
+        if self._n_turns() > 1:
+            src_turns, tgt_turns = self._turned(context)
+            corr = turned_correspondences(src_turns[0], tgt_turns)
+        else:
+            src, tgt = self._describe(context)
+            corr = find_correspondences(src, tgt, **filters)
         self._enough(
             len(corr),
             "correspondences survived the filters",

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._utils.params import Interval, Options, StrOptions
+from ..._utils.params import Interval, StrOptions
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..correspondences import (
@@ -21,7 +21,14 @@ from ..correspondences import (
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
-from ._global import DESCRIPTOR, HYPOTHESES, N_HYPOTHESES_DOC, GlobalStep
+from ._global import (
+    DESCRIPTOR,
+    FRAME_TURNS,
+    FRAME_TURNS_DOC,
+    HYPOTHESES,
+    N_HYPOTHESES_DOC,
+    GlobalStep,
+)
 
 __all__ = ["ConsensusGlobal"]
 
@@ -81,16 +88,7 @@ class ConsensusGlobal(GlobalStep):
         floors and table tops, whose descriptors repeat, then stop drowning the few
         right matches of a pair that overlaps little. ``None``: every match
         (docs/registration.md, "Pairs that overlap little").
-    frame_turns : {1, 2, 4}, default=1
-        Match each point's descriptor against the other cloud's descriptors under
-        every turn of their local frames about the normal (a half turn for 2, every
-        quarter turn for 4; ``RPointHopTransformer.transform_turns``): a true
-        correspondence whose frames agree only up to such a turn (most of them on
-        walls and floors, where the in-plane axes are a matter of sampling) then
-        matches too. Needs a descriptor with local frames (R-PointHop); above 1 it
-        cannot be combined with ``mutual_filter``, ``max_ratio`` or ``n_nearest``.
-        Costs a projection per turn when describing and ``frame_turns`` times the
-        matching (docs/registration.md, "Frames that agree up to a turn").
+    {frame_turns}
     max_matches : int, default=8000
         Most matches the graph is built on; its two bit matrices take ``max_matches**2 /
         4`` bytes (16 MB at 8000).
@@ -141,7 +139,7 @@ class ConsensusGlobal(GlobalStep):
         "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
         "n_nearest": [Interval(Integral, 1, None, closed="left")],
         "salient_share": [None, Interval(Real, 0, 1, closed="right")],
-        "frame_turns": [Options(Integral, {1, 2, 4})],
+        "frame_turns": FRAME_TURNS,
         "max_matches": [Interval(Integral, 3, None, closed="left")],
         "cap": [StrOptions({"index", "distance"})],
         "score_distance": OPTIONAL_DISTANCE,
@@ -210,33 +208,19 @@ class ConsensusGlobal(GlobalStep):
                 "with mutual_filter or max_ratio (both are defined on the nearest "
                 "descriptor alone)"
             )
-        if self.frame_turns > 1 and (
-            self.mutual_filter or self.max_ratio is not None or self.n_nearest > 1
-        ):
-            raise ValueError(
-                f"{type(self).__name__}: frame_turns={self.frame_turns} cannot be "
-                "combined with mutual_filter, max_ratio or n_nearest > 1 (matches over "
-                "turns take each point's nearest turned descriptor alone)"
-            )
+        super()._check_params()
 
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
         filters = dict(mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
-        if self.frame_turns > 1:  # first: turn 0 is then the plain descriptors
-            src_turns, tgt_turns = (
-                context.features(self.descriptor, which, self.frame_turns)
-                for which in ("source", "target")
-            )
-        src, tgt = self._describe(context)
-        if self.frame_turns > 1:
-            corr = turned_correspondences(src, tgt_turns)
-        elif self.n_nearest > 1:
-            corr = k_best_correspondences(src, tgt, self.n_nearest)
+        if self.n_nearest > 1:
+            corr = k_best_correspondences(*self._describe(context), self.n_nearest)
         else:
             corr = self._correspond(context, **filters)
+        src, tgt = self._describe(context)
         if self.both_directions and not self.mutual_filter:
             if self.frame_turns > 1:
-                back = turned_correspondences(tgt, src_turns)
+                back = turned_correspondences(tgt, self._turned(context)[0])
             elif self.n_nearest > 1:
                 back = k_best_correspondences(tgt, src, self.n_nearest)
             else:
@@ -308,4 +292,4 @@ class ConsensusGlobal(GlobalStep):
 if ConsensusGlobal.__doc__:  # None under python -OO
     ConsensusGlobal.__doc__ = ConsensusGlobal.__doc__.replace(
         "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
-    )
+    ).replace("{frame_turns}", FRAME_TURNS_DOC)

@@ -11,7 +11,14 @@ from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
-from ._global import DESCRIPTOR, HYPOTHESES, N_HYPOTHESES_DOC, GlobalStep
+from ._global import (
+    DESCRIPTOR,
+    FRAME_TURNS,
+    FRAME_TURNS_DOC,
+    HYPOTHESES,
+    N_HYPOTHESES_DOC,
+    GlobalStep,
+)
 from ._ransac import ransac
 
 __all__ = ["RANSACGlobal"]
@@ -56,6 +63,7 @@ class RANSACGlobal(GlobalStep):
         inlier distance of the target (Open3D's rule), then refitted on those cloud
         pairs; ``"matches"``, by the matches it carries (then their residuals), then
         refitted on those matches, as correspondence-graph estimators score.
+    {frame_turns}
     {n_hypotheses}
     """
 
@@ -71,6 +79,7 @@ class RANSACGlobal(GlobalStep):
         "ransac_n": [Interval(Integral, 3, None, closed="left")],
         "edge_length": [Interval(Real, 0, 1, closed="left")],
         "selection": [StrOptions({"fitness", "matches"})],
+        "frame_turns": FRAME_TURNS,
         "n_hypotheses": HYPOTHESES,
     }
 
@@ -86,6 +95,7 @@ class RANSACGlobal(GlobalStep):
         ransac_n: int = 3,
         edge_length: float = 0.9,
         selection: str = "fitness",
+        frame_turns: int = 1,
         n_hypotheses: int = 1,
     ) -> None:
         self.descriptor = descriptor
@@ -97,6 +107,7 @@ class RANSACGlobal(GlobalStep):
         self.ransac_n = ransac_n
         self.edge_length = edge_length
         self.selection = selection
+        self.frame_turns = frame_turns
         self.n_hypotheses = n_hypotheses
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
@@ -133,4 +144,4 @@ class RANSACGlobal(GlobalStep):
 if RANSACGlobal.__doc__:  # None under python -OO
     RANSACGlobal.__doc__ = RANSACGlobal.__doc__.replace(
         "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
-    )
+    ).replace("{frame_turns}", FRAME_TURNS_DOC)
