@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 from o3d_rpointhop import (
     ConsensusGlobal,
     FPFHTransformer,
+    RANSACGlobal,
     RegistrationPipeline,
     RegistrationWarning,
     register,
@@ -109,6 +110,17 @@ def test_only_matches_over_turns_find_partners_whose_frames_differ_by_a_turn():
     assert rotation_error_deg(turned.transformation, truth) < 0.5
     # The preparation stage asked for the turns, once per cloud, and nothing else.
     assert descriptor.asked == [4, 4]
+
+
+def test_ransac_matches_over_turns_too():
+    source, target, truth, descriptor = _pair_whose_frames_agree_after_a_turn()
+    turned = _global(RANSACGlobal(frame_turns=4), source, target, descriptor)
+    moved = apply_transform(turned.steps[0].matches[:, 0], truth)
+    right = np.linalg.norm(moved - turned.steps[0].matches[:, 1], axis=1) < 1e-6
+    assert right.all() and len(right) == 500  # one match per source point, each right
+    assert rotation_error_deg(turned.transformation, truth) < 0.5
+    with pytest.raises(ValueError, match="frame_turns=2 cannot be combined"):
+        _global(RANSACGlobal(frame_turns=2, mutual_filter=True), source, target, descriptor)
 
 
 def test_the_context_keeps_turn_zero_as_the_plain_descriptors(object_model):
