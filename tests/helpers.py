@@ -181,3 +181,15 @@ class CodesBySize:
 
     def transform(self, X):
         return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
+
+
+def global_step_only(step, source, target, descriptor):
+    """``step`` alone as a pipeline with ``descriptor``: its result, warnings silenced."""
+    import warnings
+
+    from o3d_rpointhop import RegistrationPipeline, RegistrationWarning
+
+    pipeline = RegistrationPipeline([("global", step)], descriptor=descriptor)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RegistrationWarning)
+        return pipeline.register(source, target)

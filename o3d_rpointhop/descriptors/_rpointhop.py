@@ -352,14 +352,7 @@ class RPointHopTransformer(BaseDescriptor):
         return [config] * len(clouds)
 
     def _describe(self, points: np.ndarray, config: HopConfig, viewpoint) -> np.ndarray:
-        return self._tree().describe(
-            points,
-            config,
-            n_components=self.n_components,
-            n_threads=kernel_threads(self.n_jobs),
-            progress=self.progress,
-            viewpoint=viewpoint,
-        )
+        return self._describe_turns(points, config, viewpoint, None)
 
     def transform_turns(
         self, X: Any, n_turns: int = 4, viewpoints: Any = None
@@ -422,8 +415,10 @@ class RPointHopTransformer(BaseDescriptor):
         return map_clouds(self._describe_turns, clouds, kind, self.n_jobs, extras, views, turns)
 
     def _describe_turns(
-        self, points: np.ndarray, config: HopConfig, viewpoint, n_turns: int
+        self, points: np.ndarray, config: HopConfig, viewpoint, n_turns: int | None
     ) -> np.ndarray:
+        """One cloud's descriptors, ``(n, width)`` for ``n_turns`` None, else under each
+        turn, ``(n_turns, n, width)``."""
         return self._tree().describe(
             points,
             config,

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
-from helpers import CodesBySize
+from helpers import CodesBySize, global_step_only
 from scipy.spatial.transform import Rotation
 
-from o3d_rpointhop import ConsensusGlobal, RegistrationPipeline, RegistrationWarning
+from o3d_rpointhop import ConsensusGlobal
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.registration.correspondences import distinctiveness, salient
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
@@ -51,17 +49,10 @@ def _pair_with_a_floor():
     return source, target, truth, CodesBySize({900: src_codes, 1000: tgt_codes})
 
 
-def _run(step, source, target, descriptor):
-    pipe = RegistrationPipeline([("global", step)], descriptor=descriptor)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RegistrationWarning)
-        return pipe.register(source, target)
-
-
 def test_the_floors_matches_are_dropped_and_the_pose_found():
     source, target, truth, descriptor = _pair_with_a_floor()
-    every = _run(ConsensusGlobal(), source, target, descriptor).steps[0]
-    only = _run(ConsensusGlobal(salient_share=0.3), source, target, descriptor)
+    every = global_step_only(ConsensusGlobal(), source, target, descriptor).steps[0]
+    only = global_step_only(ConsensusGlobal(salient_share=0.3), source, target, descriptor)
     step = only.steps[0]
     assert step.info["candidate_matches"] < every.info["candidate_matches"]
     # What is left is the object's matches, right under the truth.
@@ -79,7 +70,7 @@ def test_the_floors_matches_are_dropped_and_the_pose_found():
 def test_too_few_salient_matches_is_a_clear_error():
     source, target, _, descriptor = _pair_with_a_floor()
     with pytest.raises(ValueError, match="salient"):
-        _run(ConsensusGlobal(salient_share=0.001), source, target, descriptor)
+        global_step_only(ConsensusGlobal(salient_share=0.001), source, target, descriptor)
 
 
 def _pair_with_decoys():
@@ -106,7 +97,9 @@ def _pair_with_decoys():
 def test_two_nearest_matches_hold_the_partners_that_are_second_nearest():
     source, target, truth, descriptor = _pair_with_decoys()
     found = {
-        k: _run(ConsensusGlobal(n_nearest=k, both_directions=False), source, target, descriptor)
+        k: global_step_only(
+            ConsensusGlobal(n_nearest=k, both_directions=False), source, target, descriptor
+        )
         for k in (1, 2)
     }
     right = {}

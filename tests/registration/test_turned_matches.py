@@ -3,18 +3,15 @@ the other cloud's points, planted where only a turned descriptor is right."""
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
+from helpers import global_step_only
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import (
     ConsensusGlobal,
     FPFHTransformer,
     RANSACGlobal,
-    RegistrationPipeline,
-    RegistrationWarning,
     register,
 )
 from o3d_rpointhop.datasets import make_object
@@ -87,17 +84,10 @@ def _pair_whose_frames_agree_after_a_turn():
     return source, target, truth, PlantedTurns({500: src, 600: tgt})
 
 
-def _global(step, source, target, descriptor):
-    pipeline = RegistrationPipeline([("global", step)], descriptor=descriptor)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RegistrationWarning)
-        return pipeline.register(source, target)
-
-
 def test_only_matches_over_turns_find_partners_whose_frames_differ_by_a_turn():
     source, target, truth, descriptor = _pair_whose_frames_agree_after_a_turn()
-    plain = _global(ConsensusGlobal(), source, target, descriptor).steps[0]
-    turned = _global(ConsensusGlobal(frame_turns=4), source, target, descriptor)
+    plain = global_step_only(ConsensusGlobal(), source, target, descriptor).steps[0]
+    turned = global_step_only(ConsensusGlobal(frame_turns=4), source, target, descriptor)
 
     def right(step):
         moved = apply_transform(step.matches[:, 0], truth)
@@ -114,13 +104,15 @@ def test_only_matches_over_turns_find_partners_whose_frames_differ_by_a_turn():
 
 def test_ransac_matches_over_turns_too():
     source, target, truth, descriptor = _pair_whose_frames_agree_after_a_turn()
-    turned = _global(RANSACGlobal(frame_turns=4), source, target, descriptor)
+    turned = global_step_only(RANSACGlobal(frame_turns=4), source, target, descriptor)
     moved = apply_transform(turned.steps[0].matches[:, 0], truth)
     right = np.linalg.norm(moved - turned.steps[0].matches[:, 1], axis=1) < 1e-6
     assert right.all() and len(right) == 500  # one match per source point, each right
     assert rotation_error_deg(turned.transformation, truth) < 0.5
     with pytest.raises(ValueError, match="frame_turns=2 cannot be combined"):
-        _global(RANSACGlobal(frame_turns=2, mutual_filter=True), source, target, descriptor)
+        global_step_only(
+            RANSACGlobal(frame_turns=2, mutual_filter=True), source, target, descriptor
+        )
 
 
 def test_the_context_keeps_turn_zero_as_the_plain_descriptors(object_model):
