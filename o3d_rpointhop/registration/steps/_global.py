@@ -22,6 +22,7 @@ __all__ = [
     "GlobalStep",
     "HYPOTHESES",
     "N_HYPOTHESES_DOC",
+    "with_shared_docs",
 ]
 
 #: The constraint of a step's own descriptor: ``None`` (the pipeline's) or a transformer.
@@ -59,6 +60,16 @@ N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
         ``1 - AMBIGUITY_RATIO`` makes the result ``ambiguous``). 1: the step's own
         ranking decides, nothing is verified (docs/registration.md, "Pairs that
         overlap little")."""
+
+
+def with_shared_docs(cls: type) -> type:
+    """Write the shared parameter texts (``{n_hypotheses}``, ``{frame_turns}``) into a
+    global step's docstring (absent under ``python -OO``)."""
+    if cls.__doc__:
+        cls.__doc__ = cls.__doc__.replace(
+            "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
+        ).replace("{frame_turns}", FRAME_TURNS_DOC)
+    return cls
 
 
 class GlobalStep(RegistrationStep):

@@ -21,14 +21,7 @@ from ..correspondences import (
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
-from ._global import (
-    DESCRIPTOR,
-    FRAME_TURNS,
-    FRAME_TURNS_DOC,
-    HYPOTHESES,
-    N_HYPOTHESES_DOC,
-    GlobalStep,
-)
+from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, GlobalStep, with_shared_docs
 
 __all__ = ["ConsensusGlobal"]
 
@@ -36,6 +29,7 @@ __all__ = ["ConsensusGlobal"]
 _OPTIONAL_LENGTH = [None, Interval(Real, 0, None, closed="left")]
 
 
+@with_shared_docs
 class ConsensusGlobal(GlobalStep):
     """The rigid motion the largest set of mutually consistent matches agrees on.
 
@@ -287,9 +281,3 @@ class ConsensusGlobal(GlobalStep):
             hypotheses=found.n_hypotheses,
             **chosen,
         )
-
-
-if ConsensusGlobal.__doc__:  # None under python -OO
-    ConsensusGlobal.__doc__ = ConsensusGlobal.__doc__.replace(
-        "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
-    ).replace("{frame_turns}", FRAME_TURNS_DOC)

@@ -11,19 +11,13 @@ from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
-from ._global import (
-    DESCRIPTOR,
-    FRAME_TURNS,
-    FRAME_TURNS_DOC,
-    HYPOTHESES,
-    N_HYPOTHESES_DOC,
-    GlobalStep,
-)
+from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, GlobalStep, with_shared_docs
 from ._ransac import ransac
 
 __all__ = ["RANSACGlobal"]
 
 
+@with_shared_docs
 class RANSACGlobal(GlobalStep):
     """RANSAC on descriptor matches.
 
@@ -139,9 +133,3 @@ class RANSACGlobal(GlobalStep):
             iterations=found.iterations,
             **chosen,
         )
-
-
-if RANSACGlobal.__doc__:  # None under python -OO
-    RANSACGlobal.__doc__ = RANSACGlobal.__doc__.replace(
-        "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
-    ).replace("{frame_turns}", FRAME_TURNS_DOC)
