@@ -195,8 +195,9 @@ class RegistrationContext:
     def prepare(self, descriptors: Any = ()) -> float:
         """Prepare what the steps will share, before the first runs: both global clouds
         (:func:`~o3d_rpointhop.registration.prepared.prepare_cloud`) and their
-        descriptors by each ``(descriptor, n_turns)`` of ``descriptors`` (``None``: the
-        context's own; see :meth:`features`). Idempotent.
+        descriptors by each of ``descriptors``: a descriptor (``None``: the context's
+        own), or ``(descriptor, n_turns)`` for its descriptors under turns of the local
+        frames (see :meth:`features`). Idempotent.
 
         Returns
         -------
@@ -206,7 +207,8 @@ class RegistrationContext:
         start = time.perf_counter()
         for which in ("source", "target"):
             self.global_cloud(which)
-        for descriptor, n_turns in descriptors:
+        for entry in descriptors:
+            descriptor, n_turns = entry if isinstance(entry, tuple) else (entry, 1)
             for which in ("source", "target"):
                 self.features(descriptor, which, n_turns)
         return time.perf_counter() - start

@@ -150,3 +150,15 @@ def test_turns_need_a_descriptor_with_frames_and_the_nearest_alone():
             ConsensusGlobal(frame_turns=4, **bad).run(None, np.eye(4))
     with pytest.raises(ValueError, match="frame_turns"):
         ConsensusGlobal(frame_turns=3).run(None, np.eye(4))
+
+
+def test_prepare_takes_descriptors_alone_or_with_their_turns(object_model):
+    cloud = make_object(1200, shape_seed=5)
+    context = RegistrationContext(cloud, cloud + 0.05, descriptor=object_model)
+    context.prepare([None, (None, 2)])
+    assert sorted(key[1:] for key in context._features) == [
+        ("source", 1),
+        ("source", 2),
+        ("target", 1),
+        ("target", 2),
+    ]
