@@ -188,6 +188,18 @@ def consensus_turns_salient():
     return ConsensusGlobal(frame_turns=4, salient_share=0.75)
 
 
+def consensus_turns_3_hypotheses():
+    """The consensus on matches over every quarter turn of the local frames, verifying
+    its three best distinct hypotheses by overlap."""
+    return ConsensusGlobal(frame_turns=4, n_hypotheses=3)
+
+
+def consensus_turns_salient_3_hypotheses():
+    """The consensus on matches over every quarter turn of the local frames between
+    salient points, verifying its three best distinct hypotheses by overlap."""
+    return ConsensusGlobal(frame_turns=4, salient_share=0.75, n_hypotheses=3)
+
+
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
     ``global_method`` makes a fresh step per pair): it returns the whole result (the
@@ -362,6 +374,24 @@ METHODS = _methods(
         "of the local frames between salient points (frame_turns=4, salient_share=0.75) "
         "+ point-to-plane ICP",
         _register_with(global_method=consensus_turns_salient),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-turns-verified",
+        "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
+        "of the local frames with three hypotheses verified by overlap (frame_turns=4, "
+        "n_hypotheses=3) + point-to-plane ICP",
+        _register_with(global_method=consensus_turns_3_hypotheses),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-turns-salient-verified",
+        "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
+        "of the local frames between salient points with three hypotheses verified by "
+        "overlap (frame_turns=4, salient_share=0.75, n_hypotheses=3) + point-to-plane ICP",
+        _register_with(global_method=consensus_turns_salient_3_hypotheses),
         datasets=_SCENES,
         model="scene",
     ),
