@@ -358,9 +358,8 @@ def turned_correspondences(source_features, target_turns) -> Correspondences:
     point = idx % m
     nearest = point[:, 0]
     d1 = dist[:, 0]
-    other = point != nearest[:, None]
-    first_other = np.where(other.any(axis=1), other.argmax(axis=1), -1)
-    d2 = np.where(first_other >= 0, np.take_along_axis(dist, first_other[:, None], 1)[:, 0], np.inf)
+    # Distances come nearest first: the nearest row of another point is the least of them.
+    d2 = np.where(point != nearest[:, None], dist, np.inf).min(axis=1)
     ratio = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
     ratio[(d2 == 0) & (d1 == 0)] = 1.0
     return Correspondences(
