@@ -200,6 +200,23 @@ def consensus_turns_salient_3_hypotheses():
     return ConsensusGlobal(frame_turns=4, salient_share=0.75, n_hypotheses=3)
 
 
+def consensus_cosine():
+    """The consensus on matches by the descriptors' cosine distance."""
+    return ConsensusGlobal(metric="cosine")
+
+
+def consensus_turns_cosine():
+    """The consensus on matches by cosine distance over every quarter turn of the
+    local frames."""
+    return ConsensusGlobal(metric="cosine", frame_turns=4)
+
+
+def consensus_turns_salient_cosine():
+    """The consensus on matches by cosine distance over every quarter turn of the
+    local frames, between salient points (the 75 % most distinct of each cloud)."""
+    return ConsensusGlobal(metric="cosine", frame_turns=4, salient_share=0.75)
+
+
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
     ``global_method`` makes a fresh step per pair): it returns the whole result (the
@@ -396,6 +413,32 @@ METHODS = _methods(
         model="scene",
     ),
     Method(
+        "rpointhop-scene-cosine",
+        "R-PointHop, shipped scene model, consensus on matches by cosine distance "
+        "(metric='cosine') + point-to-plane ICP",
+        _register_with(global_method=consensus_cosine),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-turns-cosine",
+        "R-PointHop, shipped scene model, consensus on matches by cosine distance over "
+        "every quarter turn of the local frames (metric='cosine', frame_turns=4) + "
+        "point-to-plane ICP",
+        _register_with(global_method=consensus_turns_cosine),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
+        "rpointhop-scene-turns-salient-cosine",
+        "R-PointHop, shipped scene model, consensus on matches by cosine distance over "
+        "every quarter turn of the local frames between salient points "
+        "(metric='cosine', frame_turns=4, salient_share=0.75) + point-to-plane ICP",
+        _register_with(global_method=consensus_turns_salient_cosine),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-up",
         "R-PointHop, shipped scene model, register() defaults, up-axis prior (camera -y)",
         _register_with(up=CAMERA_UP),
@@ -500,6 +543,24 @@ METHODS = _methods(
         "FPFH through this library's consensus on matches between salient points "
         "(salient_share=0.75) with three hypotheses verified by overlap + ICP",
         _fpfh_pipeline(global_method=consensus_salient_3_hypotheses),
+        datasets=_SCENES,
+        model=None,
+        descriptor="fpfh",
+    ),
+    Method(
+        "fpfh-pipeline-consensus-cosine-icp",
+        "FPFH through this library's consensus on matches by cosine distance "
+        "(metric='cosine') + ICP",
+        _fpfh_pipeline(global_method=consensus_cosine),
+        datasets=_SCENES,
+        model=None,
+        descriptor="fpfh",
+    ),
+    Method(
+        "fpfh-pipeline-consensus-cosine-icp-4096",
+        "FPFH through this library's consensus on matches by cosine distance "
+        "(metric='cosine') + ICP, 4096 global points",
+        _fpfh_pipeline(global_method=consensus_cosine, n_global_points=4096),
         datasets=_SCENES,
         model=None,
         descriptor="fpfh",

@@ -7,9 +7,14 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from ..._utils.params import HasMethods, Interval, Options
+from ..._utils.params import HasMethods, Interval, Options, StrOptions
 from ..context import RegistrationContext
-from ..correspondences import Correspondences, find_correspondences, turned_correspondences
+from ..correspondences import (
+    Correspondences,
+    find_correspondences,
+    turned_correspondences,
+    unit_rows,
+)
 from ..result import StepResult
 from ._base import RegistrationStep
 from ._hypotheses import verify
@@ -21,6 +26,8 @@ __all__ = [
     "FRAME_TURNS_DOC",
     "GlobalStep",
     "HYPOTHESES",
+    "METRIC",
+    "METRIC_DOC",
     "N_HYPOTHESES_DOC",
     "with_shared_docs",
 ]
@@ -34,6 +41,19 @@ HYPOTHESES = [Interval(Integral, 1, None, closed="left")]
 
 #: The constraint of the turns of the local frames matched over.
 FRAME_TURNS = [Options(Integral, {1, 2, 4})]
+
+#: The constraint of the distance descriptors are matched by.
+METRIC = [StrOptions({"euclidean", "cosine"})]
+
+#: The docstring of ``metric``, shared by the steps that have it.
+METRIC_DOC = """metric : {"euclidean", "cosine"}, default="euclidean"
+        How descriptors are compared when they are matched (as in scikit-learn's
+        ``NearestNeighbors``). ``"cosine"``: by the angle between them, the Euclidean
+        distance of the descriptors scaled to unit length, so a descriptor's length
+        (large where a neighbourhood is busy, small where it is flat) no longer
+        decides its nearest partner; more of a low-overlap pair's true matches are
+        nearest (docs/registration.md, "Pairs that overlap little"). Distances,
+        ratios and salient points are then those of the unit descriptors."""
 
 #: The docstring of ``frame_turns``, shared by the steps that have it.
 FRAME_TURNS_DOC = """frame_turns : {1, 2, 4}, default=1
@@ -63,12 +83,14 @@ N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
 
 
 def with_shared_docs(cls: type) -> type:
-    """Write the shared parameter texts (``{n_hypotheses}``, ``{frame_turns}``) into a
-    global step's docstring (absent under ``python -OO``)."""
+    """Write the shared parameter texts (``{n_hypotheses}``, ``{frame_turns}``,
+    ``{metric}``) into a global step's docstring (absent under ``python -OO``)."""
     if cls.__doc__:
-        cls.__doc__ = cls.__doc__.replace(
-            "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
-        ).replace("{frame_turns}", FRAME_TURNS_DOC)
+        cls.__doc__ = (
+            cls.__doc__.replace("{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1))
+            .replace("{frame_turns}", FRAME_TURNS_DOC)
+            .replace("{metric}", METRIC_DOC)
+        )
     return cls
 
 
@@ -105,16 +127,24 @@ class GlobalStep(RegistrationStep):
         (computed before the plain ones, which are their turn 0)."""
         n_turns = self._n_turns()
         return (
-            context.features(self.descriptor, "source", n_turns),
-            context.features(self.descriptor, "target", n_turns),
+            self._compared(context.features(self.descriptor, "source", n_turns)),
+            self._compared(context.features(self.descriptor, "target", n_turns)),
         )
 
     def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
         # None: the context's descriptors (prepared, or its descriptor's).
         return (
-            context.features(self.descriptor, "source"),
-            context.features(self.descriptor, "target"),
+            self._compared(context.features(self.descriptor, "source")),
+            self._compared(context.features(self.descriptor, "target")),
         )
+
+    def _compared(self, features: np.ndarray) -> np.ndarray:
+        """``features`` as the step's ``metric`` compares them: as they are, or scaled
+        to unit length along their last axis for ``"cosine"`` (a zero descriptor stays
+        zero)."""
+        if getattr(self, "metric", "euclidean") == "euclidean":
+            return features
+        return unit_rows(features)
 
     @staticmethod
     def _matched(context: RegistrationContext, corr: Correspondences):

@@ -21,7 +21,7 @@ from ..correspondences import (
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
-from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, GlobalStep, with_shared_docs
+from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, METRIC, GlobalStep, with_shared_docs
 
 __all__ = ["ConsensusGlobal"]
 
@@ -82,6 +82,7 @@ class ConsensusGlobal(GlobalStep):
         floors and table tops, whose descriptors repeat, then stop drowning the few
         right matches of a pair that overlaps little. ``None``: every match
         (docs/registration.md, "Pairs that overlap little").
+    {metric}
     {frame_turns}
     max_matches : int, default=8000
         Most matches the graph is built on; its two bit matrices take ``max_matches**2 /
@@ -133,6 +134,7 @@ class ConsensusGlobal(GlobalStep):
         "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
         "n_nearest": [Interval(Integral, 1, None, closed="left")],
         "salient_share": [None, Interval(Real, 0, 1, closed="right")],
+        "metric": METRIC,
         "frame_turns": FRAME_TURNS,
         "max_matches": [Interval(Integral, 3, None, closed="left")],
         "cap": [StrOptions({"index", "distance"})],
@@ -159,6 +161,7 @@ class ConsensusGlobal(GlobalStep):
         max_ratio: float | None = None,
         n_nearest: int = 1,
         salient_share: float | None = None,
+        metric: str = "euclidean",
         frame_turns: int = 1,
         max_matches: int = 8000,
         cap: str = "index",
@@ -181,6 +184,7 @@ class ConsensusGlobal(GlobalStep):
         self.max_ratio = max_ratio
         self.n_nearest = n_nearest
         self.salient_share = salient_share
+        self.metric = metric
         self.frame_turns = frame_turns
         self.max_matches = max_matches
         self.cap = cap

@@ -11,7 +11,7 @@ from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
-from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, GlobalStep, with_shared_docs
+from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, METRIC, GlobalStep, with_shared_docs
 from ._ransac import ransac
 
 __all__ = ["RANSACGlobal"]
@@ -57,6 +57,7 @@ class RANSACGlobal(GlobalStep):
         inlier distance of the target (Open3D's rule), then refitted on those cloud
         pairs; ``"matches"``, by the matches it carries (then their residuals), then
         refitted on those matches, as correspondence-graph estimators score.
+    {metric}
     {frame_turns}
     {n_hypotheses}
     """
@@ -73,6 +74,7 @@ class RANSACGlobal(GlobalStep):
         "ransac_n": [Interval(Integral, 3, None, closed="left")],
         "edge_length": [Interval(Real, 0, 1, closed="left")],
         "selection": [StrOptions({"fitness", "matches"})],
+        "metric": METRIC,
         "frame_turns": FRAME_TURNS,
         "n_hypotheses": HYPOTHESES,
     }
@@ -89,6 +91,7 @@ class RANSACGlobal(GlobalStep):
         ransac_n: int = 3,
         edge_length: float = 0.9,
         selection: str = "fitness",
+        metric: str = "euclidean",
         frame_turns: int = 1,
         n_hypotheses: int = 1,
     ) -> None:
@@ -101,6 +104,7 @@ class RANSACGlobal(GlobalStep):
         self.ransac_n = ransac_n
         self.edge_length = edge_length
         self.selection = selection
+        self.metric = metric
         self.frame_turns = frame_turns
         self.n_hypotheses = n_hypotheses
 
