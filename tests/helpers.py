@@ -183,6 +183,22 @@ class CodesBySize:
         return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
 
 
+class TurnedCodesBySize(CodesBySize):
+    """Planted codes per turn of each cloud's frames: ``codes[n]`` is ``(4, n, d)``, turn
+    0 the plain descriptor; ``asked`` lists the turn counts requested."""
+
+    def __init__(self, codes: dict[int, np.ndarray]):
+        super().__init__(codes)
+        self.asked: list[int] = []
+
+    def transform(self, X):
+        return super().transform(X)[0]
+
+    def transform_turns(self, X, n_turns, viewpoints=None):
+        self.asked.append(n_turns)
+        return super().transform(X)[[4 * t // n_turns for t in range(n_turns)]]
+
+
 def global_step_only(step, source, target, descriptor):
     """``step`` alone as a pipeline with ``descriptor``: its result, warnings silenced."""
     import warnings

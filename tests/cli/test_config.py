@@ -79,6 +79,11 @@ def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pai
         (["--set", "ransac.max_iteration=-5"], "[ransac]: The 'max_iteration' parameter", 2),
         (["--set", "ransac.max_iteration=abc"], "[ransac]: The 'max_iteration' parameter", 2),
         (["--set", "settings.icp_factors=[]"], "[settings]:", 2),
+        (
+            ["--global", "consensus", "--set", "consensus.metric=manhattan"],
+            "[consensus]: The 'metric' parameter",
+            2,
+        ),
         (  # a check that relates two parameters: also before any cloud is read
             [
                 "--global",

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import global_step_only
+from helpers import TurnedCodesBySize, global_step_only
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import (
@@ -45,25 +45,6 @@ def test_turned_correspondences_refuse_a_flat_stack():
         turned_correspondences(np.ones((3, 4)), np.ones((5, 4)))
 
 
-class PlantedTurns:
-    """Planted codes per turn of each cloud's frames (the clouds told apart by size):
-    ``turns[n]`` is ``(4, n, d)``; turn 0 is the plain descriptor."""
-
-    def __init__(self, turns: dict[int, np.ndarray]):
-        self.turns = turns
-        self.asked: list[int] = []
-
-    def _codes(self, X):
-        return self.turns[len(np.asarray(X.points if hasattr(X, "points") else X))]
-
-    def transform(self, X):
-        return self._codes(X)[0]
-
-    def transform_turns(self, X, n_turns, viewpoints=None):
-        self.asked.append(n_turns)
-        return self._codes(X)[[4 * t // n_turns for t in range(n_turns)]]
-
-
 def _pair_whose_frames_agree_after_a_turn():
     """An object and 500 of its points moved. Plain descriptors of partners are
     unrelated; the target's frames turned by a quarter turn describe a point as its
@@ -81,7 +62,7 @@ def _pair_whose_frames_agree_after_a_turn():
     tgt = rng.normal(size=(4, 600, dim))
     tgt[1, keep] = src[0] + rng.normal(0, 1e-4, (500, dim))
     src[3] = tgt[0, keep] + rng.normal(0, 1e-4, (500, dim))
-    return source, target, truth, PlantedTurns({500: src, 600: tgt})
+    return source, target, truth, TurnedCodesBySize({500: src, 600: tgt})
 
 
 def test_only_matches_over_turns_find_partners_whose_frames_differ_by_a_turn():

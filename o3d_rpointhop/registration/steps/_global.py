@@ -48,12 +48,12 @@ METRIC = [StrOptions({"euclidean", "cosine"})]
 #: The docstring of ``metric``, shared by the steps that have it.
 METRIC_DOC = """metric : {"euclidean", "cosine"}, default="euclidean"
         How descriptors are compared when they are matched (as in scikit-learn's
-        ``NearestNeighbors``). ``"cosine"``: by the angle between them, the Euclidean
-        distance of the descriptors scaled to unit length, so a descriptor's length
-        (large where a neighbourhood is busy, small where it is flat) no longer
-        decides its nearest partner; more of a low-overlap pair's true matches are
-        nearest (docs/registration.md, "Pairs that overlap little"). Distances,
-        ratios and salient points are then those of the unit descriptors."""
+        ``NearestNeighbors``). ``"cosine"``: by the angle between them (the
+        Euclidean distance of the descriptors scaled to unit length,
+        :func:`~o3d_rpointhop.registration.correspondences.unit_rows`), so that two
+        descriptors pointing the same way match whatever their lengths; distances,
+        ratios and salient points are then those of the unit descriptors
+        (docs/registration.md, "Matches by cosine distance")."""
 
 #: The docstring of ``frame_turns``, shared by the steps that have it.
 FRAME_TURNS_DOC = """frame_turns : {1, 2, 4}, default=1
