@@ -202,6 +202,7 @@ def registration_options(
             step._validate_all()
         except (ValueError, TypeError) as exc:
             raise UsageError(f"[{_section_of(step)[0]}]: {exc}") from None
+    _check_unused_steps(config, {_section_of(step)[0] for _, step in chain})
     first = chain[0][1] if chain[0][0] == "global" else None
     rest = [step for name, step in chain if name != "global"]
     settings = config.get("settings")
@@ -219,6 +220,17 @@ def registration_options(
         "viewpoints": register["viewpoints"],
         "up": register["up"],
     }
+
+
+def _check_unused_steps(config: dict[str, dict], used: set[str]) -> None:
+    """Check the values of the step sections a run does not use as well: a bad value in
+    a config file is an error whichever step the run picks."""
+    for name, step_class in _steps().items():
+        if name in config and name not in used:
+            try:
+                step_class(**config[name])._validate_all()
+            except (ValueError, TypeError) as exc:
+                raise UsageError(f"[{name}] (not used by this run): {exc}") from None
 
 
 def multiway_options(

@@ -84,6 +84,16 @@ def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pai
             "[consensus]: The 'metric' parameter",
             2,
         ),
+        (  # a section the run does not use is checked too
+            ["--global", "ransac", "--set", "consensus.metric=manhattan"],
+            "[consensus] (not used by this run): The 'metric' parameter",
+            2,
+        ),
+        (
+            ["--set", "consensus.frame_turns=4", "--set", "consensus.mutual_filter=true"],
+            "[consensus] (not used by this run): ConsensusGlobal: frame_turns=4 cannot",
+            2,
+        ),
         (  # a check that relates two parameters: also before any cloud is read
             [
                 "--global",

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import CodesBySize
 
+from o3d_rpointhop import register
 from o3d_rpointhop.datasets import make_object
 
 
@@ -192,3 +194,12 @@ def test_a_bad_origin_is_refused(origin):
 
     with pytest.raises(ValueError, match="origin"):
         RegistrationContext(cloud, cloud, origin=origin)
+
+
+def test_viewpoints_for_a_descriptor_that_takes_none_are_a_clear_error():
+    cloud = make_object(500)
+    codes = CodesBySize({500: np.random.default_rng(0).normal(size=(500, 8))})
+    with pytest.raises(TypeError, match="CodesBySize.transform takes none"):
+        register(cloud, cloud + 0.1, codes, viewpoints="origin", global_method="consensus")
+    # Without viewpoints the same descriptor registers.
+    assert register(cloud, cloud + 0.1, codes, global_method="consensus").steps

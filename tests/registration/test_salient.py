@@ -9,7 +9,11 @@ from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import ConsensusGlobal
 from o3d_rpointhop.datasets import make_object
-from o3d_rpointhop.registration.correspondences import distinctiveness, salient
+from o3d_rpointhop.registration.correspondences import (
+    distinctiveness,
+    k_best_correspondences,
+    salient,
+)
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
 
 
@@ -109,6 +113,18 @@ def test_two_nearest_matches_hold_the_partners_that_are_second_nearest():
         right[k] = int((np.linalg.norm(moved - matches[:, 1], axis=1) < 1e-6).sum())
     assert right[1] == 20 and right[2] == 400
     assert rotation_error_deg(found[2].transformation, truth) < 1.0
+
+
+def test_two_nearest_both_ways_add_each_target_point_s_two_nearest():
+    source, target, truth, descriptor = _pair_with_decoys()
+    result = global_step_only(ConsensusGlobal(n_nearest=2), source, target, descriptor)
+    src, tgt = descriptor.codes[400], descriptor.codes[780]
+    forward = k_best_correspondences(src, tgt, 2).pairs
+    back = k_best_correspondences(tgt, src, 2).pairs[:, ::-1]
+    expected = np.unique(np.r_[forward, back], axis=0)  # a pair found both ways once
+    assert len(expected) < len(forward) + len(back)
+    assert result.steps[0].info["candidate_matches"] == len(expected)
+    assert rotation_error_deg(result.transformation, truth) < 1.0
 
 
 def test_two_nearest_refuses_the_filters_defined_on_the_nearest_alone():
