@@ -183,6 +183,18 @@ class CodesBySize:
         return self.codes[len(np.asarray(X.points if hasattr(X, "points") else X))]
 
 
+def moved_samples(n_points: int = 2000, shape_seed: int = 12):
+    """Two samples of one synthetic object, the first moved by a fixed motion:
+    ``(source, target, truth)`` with ``truth`` mapping the source onto the target."""
+    target = make_object(n_points, shape_seed=shape_seed, sample_seed=1)
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_euler("zyx", [120, 40, -70], degrees=True).as_matrix()
+    truth[:3, 3] = [0.1, -0.2, 0.3]
+    moved = make_object(n_points, shape_seed=shape_seed, sample_seed=2)
+    source = (moved - truth[:3, 3]) @ truth[:3, :3]
+    return source, target, truth
+
+
 class TurnedCodesBySize(CodesBySize):
     """Planted codes per turn of each cloud's frames: ``codes[n]`` is ``(4, n, d)``, turn
     0 the plain descriptor; ``asked`` lists the turn counts requested."""

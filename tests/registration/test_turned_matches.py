@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import TurnedCodesBySize, global_step_only
+from helpers import TurnedCodesBySize, global_step_only, moved_samples
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import (
@@ -109,11 +109,7 @@ def test_the_context_keeps_turn_zero_as_the_plain_descriptors(object_model):
 
 
 def test_a_real_model_registers_with_matches_over_turns(object_model):
-    target = make_object(2000, shape_seed=12, sample_seed=1)
-    truth = np.eye(4)
-    truth[:3, :3] = Rotation.from_euler("zyx", [120, 40, -70], degrees=True).as_matrix()
-    truth[:3, 3] = [0.1, -0.2, 0.3]
-    source = apply_transform(make_object(2000, shape_seed=12, sample_seed=2), np.linalg.inv(truth))
+    source, target, truth = moved_samples()
     for turns in (2, 4):
         step = ConsensusGlobal(frame_turns=turns)
         result = register(source, target, object_model, global_method=step)
