@@ -177,6 +177,31 @@ class GlobalStep(RegistrationStep):
         }
         return hypotheses[check.best], info
 
+    def _result_of(
+        self,
+        context: RegistrationContext,
+        found,
+        distance: float,
+        corr: Correspondences,
+        **info,
+    ) -> StepResult:
+        """The step's result from what its estimator ``found`` (``hypotheses`` best first,
+        ``transformation``, the matches' ``inliers``): the choice among the hypotheses
+        (:meth:`_chosen`), measured (:meth:`_measured`) with the step's own ``info``."""
+        estimate, chosen = self._chosen(
+            context, found.hypotheses, found.transformation, distance, corr
+        )
+        return self._measured(
+            context,
+            self.name,
+            estimate,
+            distance,
+            corr,
+            inlier_matches=int(found.inliers.sum()),
+            **info,
+            **chosen,
+        )
+
     def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
         """Every source point's nearest target descriptor, filtered (``filters``), or
         over every turn of the target's frames (``frame_turns``)."""

@@ -272,16 +272,4 @@ class ConsensusGlobal(GlobalStep):
             n_hypotheses=int(self.n_hypotheses),
             n_threads=kernel_threads(self.n_jobs),
         )
-        estimate, chosen = self._chosen(
-            context, found.hypotheses, found.transformation, distance, corr
-        )
-        return self._measured(
-            context,
-            self.name,
-            estimate,
-            distance,
-            corr,
-            inlier_matches=int(found.inliers.sum()),
-            hypotheses=found.n_hypotheses,
-            **chosen,
-        )
+        return self._result_of(context, found, distance, corr, hypotheses=found.n_hypotheses)

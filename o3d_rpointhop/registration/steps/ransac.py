@@ -124,16 +124,4 @@ class RANSACGlobal(GlobalStep):
             upright=None if context.up is None else context.upright,
             n_hypotheses=int(self.n_hypotheses),
         )
-        estimate, chosen = self._chosen(
-            context, found.hypotheses, found.transformation, distance, corr
-        )
-        return self._measured(
-            context,
-            self.name,
-            estimate,
-            distance,
-            corr,
-            inlier_matches=int(found.inliers.sum()),
-            iterations=found.iterations,
-            **chosen,
-        )
+        return self._result_of(context, found, distance, corr, iterations=found.iterations)
