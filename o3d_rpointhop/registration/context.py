@@ -20,6 +20,7 @@ from .._utils.validation import as_viewpoints
 from ..open3d_interop import to_point_cloud
 from ..transforms import from_centred
 from .checks import check_geometry
+from .correspondences import unit_rows
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
 from .prepared import PreparedCloud, describe_global, estimate_normals, prepare_cloud
 from .result import StepResult
@@ -242,7 +243,9 @@ class RegistrationContext:
             self._coarse.viewpoints, self._coarse.up = self.viewpoints, self.up
         return self._coarse
 
-    def features(self, descriptor: Any, which: str, n_turns: int = 1) -> np.ndarray:
+    def features(
+        self, descriptor: Any, which: str, n_turns: int = 1, unit: bool = False
+    ) -> np.ndarray:
         """Descriptors of the global cloud, computed once per descriptor object, with the
         distances it leaves to the registration at its resolution (``at_resolution``)
         and with the viewpoints, if any. ``descriptor`` None (or the context's own) is
@@ -250,9 +253,16 @@ class RegistrationContext:
         context's ``descriptor`` (the default one when that is None). ``n_turns`` above
         1: ``(n_turns, n_points, width)``, the descriptors under each turn of the local
         frames about their normals (the first, turn 0, is then also what ``n_turns=1``
-        answers)."""
+        answers). ``unit``: every descriptor scaled to unit length
+        (:func:`~o3d_rpointhop.registration.correspondences.unit_rows`, for matching by
+        cosine distance), also computed once."""
         own = descriptor is None or descriptor is self.descriptor
         key = (_OWN if own else id(descriptor), which, n_turns)
+        if unit:
+            unit_key = key + ("unit",)
+            if unit_key not in self._features:
+                self._features[unit_key] = unit_rows(self.features(descriptor, which, n_turns))
+            return self._features[unit_key]
         if key not in self._features:
             if own:
                 if self.descriptor is None:

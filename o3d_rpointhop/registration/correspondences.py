@@ -211,6 +211,15 @@ _COUNT = [None, Interval(Integral, 1, None, closed="left"), Interval(Real, 0, 1,
 _POSITIVE = [None, Interval(Real, 0, None, closed="neither")]
 
 
+def _ratio_test(nearest: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """The ratio test's statistic: the nearest distance over the second nearest (the
+    nearest of another point); 1 where both are 0 (two identical nearest descriptors:
+    ambiguous)."""
+    ratio = np.divide(nearest, second, out=np.zeros_like(nearest), where=second > 0)
+    ratio[(second == 0) & (nearest == 0)] = 1.0
+    return ratio
+
+
 @validate_params(
     {
         "source_features": "no_validation",
@@ -274,8 +283,7 @@ def find_correspondences(
     nearest = idx[:, 0]
     d1 = dist[:, 0]
     d2 = dist[:, 1] if dist.shape[1] > 1 else np.full_like(d1, np.inf)
-    ratio = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
-    ratio[(d2 == 0) & (d1 == 0)] = 1.0  # two identical nearest descriptors: ambiguous
+    ratio = _ratio_test(d1, d2)
     keep = np.ones(len(src), dtype=bool)
     if mutual_filter:
         back, _ = nearest_descriptors(tgt, src, k=1)
@@ -362,8 +370,7 @@ def turned_correspondences(source_features, target_turns) -> Correspondences:
     d1 = dist[:, 0]
     # Distances come nearest first: the nearest row of another point is the least of them.
     d2 = np.where(point != nearest[:, None], dist, np.inf).min(axis=1)
-    ratio = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
-    ratio[(d2 == 0) & (d1 == 0)] = 1.0
+    ratio = _ratio_test(d1, d2)
     return Correspondences(
         pairs=np.c_[np.arange(len(src)), nearest].astype(np.int64),
         distances=d1,

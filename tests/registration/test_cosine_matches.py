@@ -113,3 +113,15 @@ def test_an_unknown_metric_is_refused():
         ConsensusGlobal(metric="manhattan").run(None, np.eye(4))
     with pytest.raises(ValueError, match="metric"):
         RANSACGlobal(metric="cityblock").run(None, np.eye(4))
+
+
+def test_the_context_scales_descriptors_once(object_model):
+    from o3d_rpointhop.registration import RegistrationContext
+
+    cloud = make_object(1200, shape_seed=5)
+    context = RegistrationContext(cloud, cloud + 0.05, descriptor=object_model)
+    unit = context.features(None, "source", unit=True)
+    assert context.features(None, "source", unit=True) is unit  # not scaled again
+    np.testing.assert_array_equal(unit, unit_rows(context.features(None, "source")))
+    turned = context.features(None, "target", 4, unit=True)
+    np.testing.assert_array_equal(turned, unit_rows(context.features(None, "target", 4)))

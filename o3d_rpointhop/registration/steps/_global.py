@@ -8,13 +8,9 @@ from numbers import Integral, Real
 import numpy as np
 
 from ..._utils.params import HasMethods, Interval, Options, StrOptions
+from ...descriptors.pointhop import N_TURNS_ALLOWED
 from ..context import RegistrationContext
-from ..correspondences import (
-    Correspondences,
-    find_correspondences,
-    turned_correspondences,
-    unit_rows,
-)
+from ..correspondences import Correspondences, find_correspondences, turned_correspondences
 from ..result import StepResult
 from ._base import RegistrationStep
 from ._hypotheses import verify
@@ -40,7 +36,7 @@ COUNT = [Interval(Integral, 3, None, closed="left"), Interval(Real, 0, 1, closed
 HYPOTHESES = [Interval(Integral, 1, None, closed="left")]
 
 #: The constraint of the turns of the local frames matched over.
-FRAME_TURNS = [Options(Integral, {1, 2, 4})]
+FRAME_TURNS = [Options(Integral, set(N_TURNS_ALLOWED))]
 
 #: The constraint of the distance descriptors are matched by.
 METRIC = [StrOptions({"euclidean", "cosine"})]
@@ -125,26 +121,24 @@ class GlobalStep(RegistrationStep):
     def _turned(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
         """Both clouds' descriptors under every turn, ``(frame_turns, n, width)`` each
         (computed before the plain ones, which are their turn 0)."""
-        n_turns = self._n_turns()
+        n_turns, unit = self._n_turns(), self._unit()
         return (
-            self._compared(context.features(self.descriptor, "source", n_turns)),
-            self._compared(context.features(self.descriptor, "target", n_turns)),
+            context.features(self.descriptor, "source", n_turns, unit),
+            context.features(self.descriptor, "target", n_turns, unit),
         )
 
     def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
         # None: the context's descriptors (prepared, or its descriptor's).
+        unit = self._unit()
         return (
-            self._compared(context.features(self.descriptor, "source")),
-            self._compared(context.features(self.descriptor, "target")),
+            context.features(self.descriptor, "source", unit=unit),
+            context.features(self.descriptor, "target", unit=unit),
         )
 
-    def _compared(self, features: np.ndarray) -> np.ndarray:
-        """``features`` as the step's ``metric`` compares them: as they are, or scaled
-        to unit length along their last axis for ``"cosine"`` (a zero descriptor stays
-        zero)."""
-        if getattr(self, "metric", "euclidean") == "euclidean":
-            return features
-        return unit_rows(features)
+    def _unit(self) -> bool:
+        """Whether the step compares its descriptors scaled to unit length (``metric=
+        "cosine"``; the context scales them once per registration)."""
+        return getattr(self, "metric", "euclidean") == "cosine"
 
     @staticmethod
     def _matched(context: RegistrationContext, corr: Correspondences):
