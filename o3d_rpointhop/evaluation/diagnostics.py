@@ -178,10 +178,12 @@ def pair_diagnostics(context, descriptor: Any, truth: np.ndarray, radius: float 
 
 def choice_diagnostics(result: Any, truth: np.ndarray) -> dict | None:
     """Why a registration went as it did, from its global step: how many matches it
-    worked on and the share the truth explains (within the step's own inlier distance:
-    few right matches mean the matches failed), and, when it verified several
-    hypotheses, their scores, which one it chose and its margin (right matches but a
-    wrong pose mean the choice failed). None for a result without a global step.
+    worked on, the share the truth explains (within the step's own inlier distance:
+    few right matches mean the matches failed) and the share its estimate explains
+    (``support``, :attr:`~o3d_rpointhop.RegistrationResult.support`), and, when it
+    verified several hypotheses, their scores, which one it chose and its margin (right
+    matches but a wrong pose mean the choice failed). None for a result without a
+    global step.
 
     Parameters
     ----------
@@ -196,7 +198,11 @@ def choice_diagnostics(result: Any, truth: np.ndarray) -> dict | None:
         distance = step.info["max_correspondence_distance"]
         moved = apply_transform(source, truth)
         right = np.linalg.norm(moved - target, axis=1) < distance
-        out = {"matches": int(len(right)), "match_inlier_ratio": float(right.mean())}
+        out = {
+            "matches": int(len(right)),
+            "match_inlier_ratio": float(right.mean()),
+            "support": result.support,
+        }
         for key in ("hypothesis_scores", "chosen_hypothesis", "margin"):
             if key in step.info:
                 out[key] = step.info[key]

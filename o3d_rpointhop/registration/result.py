@@ -243,6 +243,22 @@ class RegistrationResult:
         margins = [s.info["margin"] for s in self.steps if "margin" in s.info]
         return min(margins) if margins else None
 
+    @property
+    def support(self) -> float | None:
+        """The share of the global step's descriptor matches that its estimate explains
+        (``match_inliers``: within the step's inlier distance), from 0 to 1; None
+        without a global step that matched descriptors.
+
+        Few agreeing matches mark a pose the matches barely single out: at low overlap
+        the results with little support are the ones most often wrong while flagged as
+        neither unconverged nor ambiguous (docs/registration.md, "How far to trust a
+        result"). The share is of the matches the step was given, so it compares
+        results of one descriptor and step setting, not across them."""
+        for step in self.steps:
+            if step.match_inliers is not None and len(step.match_inliers):
+                return float(np.mean(step.match_inliers))
+        return None
+
     def to_open3d(self):
         """This result as an ``open3d.pipelines.registration.RegistrationResult``
         (transformation, fitness, inlier RMSE and correspondence set)."""

@@ -80,8 +80,8 @@ def test_pair_diagnostics_see_frames_repeat_with_viewpoints(fitted):
 
 
 def test_choice_diagnostics_say_whether_the_matches_or_the_choice_failed(pretrained32):
-    """The global step's matches, the share the truth explains, and its verified
-    hypotheses; a wrong truth explains none of them; no global step, no diagnostics."""
+    """The global step's matches, the shares the truth and the estimate explain, and its
+    verified hypotheses; a wrong truth explains none of them; no global step, no diagnostics."""
     from o3d_rpointhop import RANSACGlobal, register
     from o3d_rpointhop.datasets import make_object
     from o3d_rpointhop.evaluation.diagnostics import choice_diagnostics
@@ -96,6 +96,7 @@ def test_choice_diagnostics_say_whether_the_matches_or_the_choice_failed(pretrai
     found = choice_diagnostics(result, truth)
     assert found["matches"] == len(result.steps[0].matches)
     assert 0.05 < found["match_inlier_ratio"] <= 1.0
+    assert found["support"] == result.support == result.steps[0].match_inliers.mean()
     assert len(found["hypothesis_scores"]) >= 1 and "margin" in found
     far = truth.copy()
     far[:3, 3] += 10.0
