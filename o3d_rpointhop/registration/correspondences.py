@@ -16,10 +16,12 @@ from .._utils.params import Interval, validate_params
 __all__ = [
     "SALIENT_NEIGHBOURS",
     "Correspondences",
+    "correspondences_both_ways",
     "count_of",
     "distinctiveness",
     "find_correspondences",
     "k_best_correspondences",
+    "nearest_both_ways",
     "nearest_descriptors",
     "salient",
     "turned_correspondences",
@@ -112,6 +114,30 @@ def nearest_descriptors(
     distances : ndarray of shape (n_queries, k)
         Nearest first.
     """
+    forward, _ = _nearest(queries, references, k, 0)
+    return forward
+
+
+def nearest_both_ways(
+    a: np.ndarray, b: np.ndarray, k: int = 2, k_back: int = 2
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """:func:`nearest_descriptors` both ways, ``(a, b, k)`` and ``(b, a, k_back)``, from one
+    pass over the distance matrix: the products ``a . b`` are computed once and each
+    block gives its rows' candidates and its columns' (the same candidates, so the same
+    answers, as the two calls).
+
+    Returns
+    -------
+    (indices, distances), (back_indices, back_distances)
+        As :func:`nearest_descriptors` returns them, for ``a``'s rows among ``b``'s and
+        for ``b``'s rows among ``a``'s.
+    """
+    return _nearest(a, b, k, max(1, int(k_back)))
+
+
+def _nearest(queries, references, k: int, k_back: int):
+    """The ``k`` nearest references of every query and, with ``k_back`` > 0, the
+    ``k_back`` nearest queries of every reference (else None)."""
     dtype = np.result_type(np.asarray(queries).dtype, np.asarray(references).dtype, np.float32)
     # Row-major copies: the candidate gathers below read whole rows.
     fast_q = np.ascontiguousarray(queries, dtype=dtype)
@@ -119,28 +145,99 @@ def nearest_descriptors(
     k = min(k, len(fast_r))
     n_candidates = min(len(fast_r), k + 2)
     ref_sq = np.einsum("ij,ij->i", fast_r, fast_r)
+    columns = None
+    if k_back:
+        k_back = min(k_back, len(fast_q))
+        columns = _ColumnCandidates(fast_q, len(fast_r), min(len(fast_q), k_back + 2))
     rows = max(1, _CHUNK_ELEMENTS // max(1, len(fast_r) + n_candidates * fast_q.shape[1]))
     indices = np.empty((len(fast_q), k), dtype=np.int64)
     distances = np.empty((len(fast_q), k), dtype=np.float64)
     for start in range(0, len(fast_q), rows):
         stop = min(len(fast_q), start + rows)
-        # |r|^2 - 2 q.r (+ |q|^2), in place: the same bits as the expression, without
-        # its two temporaries of the block's size.
-        approx = fast_q[start:stop] @ fast_r.T
-        approx *= -2.0
-        approx += ref_sq
-        if n_candidates < approx.shape[1]:
-            cand = _smallest(approx, n_candidates)
+        block = fast_q[start:stop] @ fast_r.T
+        if columns is not None:
+            # The block's products serve both ways: its columns' candidates first.
+            cand = columns.add(block, ref_sq, start, n_candidates)
         else:
-            cand = np.broadcast_to(np.arange(approx.shape[1]), approx.shape)
-        # Differences of near-equal numbers are exact in floating point; the squares are
-        # summed in float64.
-        diff = fast_r[cand] - fast_q[start:stop, None, :]
-        exact = np.sqrt(np.einsum("qcd,qcd->qc", diff, diff, dtype=np.float64))
-        order = np.argsort(exact, axis=1, kind="stable")[:, :k]
-        indices[start:stop] = np.take_along_axis(cand, order, axis=1)
-        distances[start:stop] = np.take_along_axis(exact, order, axis=1)
-    return indices, distances
+            # |r|^2 - 2 q.r (+ |q|^2), in place: the same bits as the expression,
+            # without its two temporaries of the block's size.
+            block *= -2.0
+            block += ref_sq
+            cand = _all_columns(block.shape, n_candidates)
+            if cand is None:
+                cand = _smallest(block, n_candidates)
+        indices[start:stop], distances[start:stop] = _exact(fast_q[start:stop], fast_r, cand, k)
+    if columns is None:
+        return (indices, distances), None
+    return (indices, distances), columns.nearest(fast_r, k_back)
+
+
+def _all_columns(shape, n: int) -> np.ndarray | None:
+    """Every column as every row's candidate when a row has no more than ``n`` of them."""
+    if n < shape[1]:
+        return None
+    return np.broadcast_to(np.arange(shape[1]), shape)
+
+
+def _exact(queries, references, cand, k: int):
+    """Each query's ``k`` nearest among its candidate references, measured exactly:
+    differences of near-equal numbers are exact in floating point, and the squares are
+    summed in float64."""
+    diff = references[cand] - queries[:, None, :]
+    exact = np.sqrt(np.einsum("qcd,qcd->qc", diff, diff, dtype=np.float64))
+    order = np.argsort(exact, axis=1, kind="stable")[:, :k]
+    return np.take_along_axis(cand, order, axis=1), np.take_along_axis(exact, order, axis=1)
+
+
+class _ColumnCandidates:
+    """Every reference's candidate queries, gathered block by block of the products
+    (blocks of consecutive query rows, in order): each column's ``n`` smallest of
+    ``|q|^2 - 2 q.r`` kept in order, as :func:`_smallest` would keep them from the
+    reference's own row of the distance matrix."""
+
+    def __init__(self, queries: np.ndarray, n_references: int, n: int) -> None:
+        self.queries = queries
+        self.query_sq = np.einsum("ij,ij->i", queries, queries)
+        self.n = n
+        self.every = n >= len(queries)  # then every query is a candidate
+        self.values = np.full((n_references, n), np.inf, dtype=queries.dtype)
+        self.rows = np.zeros((n_references, n), dtype=np.int64)
+        self.kept = np.zeros(n_references, dtype=np.int64)
+
+    def add(self, block, ref_sq, start: int, n_row: int) -> np.ndarray:
+        """Take a block's columns' candidates; return its rows' ``n_row`` candidates."""
+        every_row = n_row >= block.shape[1]
+        two = np.full(1, -2.0, dtype=block.dtype)
+        row_cand = _candidates_both_ways(
+            block,
+            ref_sq,
+            self.query_sq[start : start + len(block)],
+            0 if every_row else n_row,
+            start,
+            0 if self.every else self.n,
+            self.values,
+            self.rows,
+            self.kept,
+            two,
+        )
+        return _all_columns(block.shape, n_row) if every_row else row_cand
+
+    def nearest(self, references: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Every reference's ``k`` nearest queries, exactly, from its candidates."""
+        if self.every:
+            cand = _all_columns((len(references), len(self.queries)), self.n)
+        else:
+            cand = self.rows
+        indices = np.empty((len(references), k), dtype=np.int64)
+        distances = np.empty((len(references), k), dtype=np.float64)
+        size = self.queries.shape[1]
+        rows = max(1, _CHUNK_ELEMENTS // max(1, len(self.queries) + self.n * size))
+        for start in range(0, len(references), rows):
+            stop = min(len(references), start + rows)
+            indices[start:stop], distances[start:stop] = _exact(
+                references[start:stop], self.queries, cand[start:stop], k
+            )
+        return indices, distances
 
 
 #: Distance blocks from this many entries take their candidates from the compiled
@@ -189,6 +286,56 @@ def _smallest_rows(values, n):  # pragma: no cover - compiled
             out[i, r] = j
             if kept < n:
                 kept += 1
+    return out
+
+
+@kernel()
+def _candidates_both_ways(
+    block, ref_sq, query_sq, n_row, first, n_col, col_values, col_rows, col_kept, two
+):  # pragma: no cover - compiled
+    """One pass over a block of products ``q . r`` (rows: queries ``first`` on): each
+    row's ``n_row`` smallest of ``-2 q.r + |r|^2`` (returned, ``(rows, n_row)``; none
+    when ``n_row`` is 0) and, into the running lists ``col_values`` / ``col_rows`` /
+    ``col_kept``, each column's ``n_col`` smallest of ``-2 q.r + |q|^2`` (none when 0).
+    ``two`` holds -2 in the block's dtype, so each value is computed in that dtype as
+    the numpy passes compute it. Both keep a newcomer after the ones it does not beat:
+    value, then index, as :func:`_smallest`."""
+    q, m = block.shape
+    out = np.empty((q, max(n_row, 1)), dtype=np.int64)
+    best = np.empty(max(n_row, 1), dtype=block.dtype)
+    factor = two[0]
+    for i in range(q):
+        kept = 0
+        own = query_sq[i]
+        row = first + i
+        for j in range(m):
+            g = block[i, j] * factor
+            if n_col:
+                w = g + own
+                c = col_kept[j]
+                if c < n_col or w < col_values[j, n_col - 1]:
+                    r = c if c < n_col else n_col - 1
+                    while r > 0 and w < col_values[j, r - 1]:
+                        col_values[j, r] = col_values[j, r - 1]
+                        col_rows[j, r] = col_rows[j, r - 1]
+                        r -= 1
+                    col_values[j, r] = w
+                    col_rows[j, r] = row
+                    if c < n_col:
+                        col_kept[j] = c + 1
+            if n_row:
+                v = g + ref_sq[j]
+                if kept == n_row and not v < best[n_row - 1]:
+                    continue
+                r = kept if kept < n_row else n_row - 1
+                while r > 0 and v < best[r - 1]:
+                    best[r] = best[r - 1]
+                    out[i, r] = out[i, r - 1]
+                    r -= 1
+                best[r] = v
+                out[i, r] = j
+                if kept < n_row:
+                    kept += 1
     return out
 
 
@@ -275,19 +422,45 @@ def find_correspondences(
     [3, 2, 1, 0]
     """
     src, tgt = _feature_pair(source_features, target_features)
-    n = len(src)
+    if mutual_filter:
+        (idx, dist), (back, _) = nearest_both_ways(src, tgt, k=2, k_back=1)
+    else:
+        (idx, dist), back = nearest_descriptors(src, tgt, k=2), None
+    return _filtered(idx, dist, back, max_distance, max_ratio, top_k, top_k_ratio)
+
+
+def correspondences_both_ways(
+    source_features, target_features, *, max_ratio: float | None = None
+) -> tuple[Correspondences, Correspondences]:
+    """``find_correspondences(source, target)`` and ``find_correspondences(target,
+    source)`` (each with ``max_ratio``) from one pass over the descriptors' distances
+    (:func:`nearest_both_ways`): the same matches as the two calls, for half the
+    products.
+
+    Returns
+    -------
+    forward, backward : Correspondences
+        Source to target; target to source (pairs ``(target index, source index)``).
+    """
+    src, tgt = _feature_pair(source_features, target_features)
+    (idx, dist), (back_idx, back_dist) = nearest_both_ways(src, tgt, k=2, k_back=2)
+    forward = _filtered(idx, dist, None, None, max_ratio, None, None)
+    return forward, _filtered(back_idx, back_dist, None, None, max_ratio, None, None)
+
+
+def _filtered(idx, dist, back, max_distance, max_ratio, top_k, top_k_ratio) -> Correspondences:
+    """:func:`find_correspondences`' filters on every query's nearest rows ``idx`` /
+    ``dist`` (``back``: each reference's nearest query, for the mutual filter)."""
+    n = len(idx)
     top_k = None if top_k is None else count_of(top_k, n)
     top_k_ratio = None if top_k_ratio is None else count_of(top_k_ratio, n)
-
-    idx, dist = nearest_descriptors(src, tgt, k=2)
     nearest = idx[:, 0]
     d1 = dist[:, 0]
     d2 = dist[:, 1] if dist.shape[1] > 1 else np.full_like(d1, np.inf)
     ratio = _ratio_test(d1, d2)
-    keep = np.ones(len(src), dtype=bool)
-    if mutual_filter:
-        back, _ = nearest_descriptors(tgt, src, k=1)
-        keep &= back[nearest, 0] == np.arange(len(src))
+    keep = np.ones(n, dtype=bool)
+    if back is not None:
+        keep &= back[nearest, 0] == np.arange(n)
     if max_distance is not None:
         keep &= d1 <= max_distance
     if max_ratio is not None:

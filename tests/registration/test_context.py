@@ -203,3 +203,55 @@ def test_viewpoints_for_a_descriptor_that_takes_none_are_a_clear_error():
         register(cloud, cloud + 0.1, codes, viewpoints="origin", global_method="consensus")
     # Without viewpoints the same descriptor registers.
     assert register(cloud, cloud + 0.1, codes, global_method="consensus").steps
+
+
+def test_evaluations_are_open3ds_to_the_bit_whatever_the_order():
+    """The context measures each transformation once, at the widest distance asked (or
+    the spread distance), and reads nearer ones from it: every evaluation equals
+    Open3D's own at that distance, fitness, RMSE and inlier pairs, in any order of
+    distances and transformations, on both cloud sets."""
+    import open3d as o3d
+    from scipy.spatial.transform import Rotation
+
+    from o3d_rpointhop._utils.threads import repeatable_open3d
+    from o3d_rpointhop.registration.context import RegistrationContext
+
+    rng = np.random.default_rng(3)
+    target = make_object(3000, shape_seed=9, sample_seed=1) * 2.0
+    source = make_object(2500, shape_seed=9, sample_seed=2) * 2.0 + [0.01, -0.02, 0.0]
+    context = RegistrationContext(source, target, n_global_points=800)
+    spread = context.settings.spread_distance
+    motions = [np.eye(4)]
+    for _ in range(3):
+        motion = np.eye(4)
+        motion[:3, :3] = Rotation.from_rotvec(rng.normal(0, 0.2, 3)).as_matrix()
+        motion[:3, 3] = rng.normal(0, 0.1, 3)
+        motions.append(motion)
+    asked = [
+        (k % 4, which, d)
+        for k, (which, d) in enumerate(
+            [
+                ("full", 0.3 * spread),
+                ("full", spread),
+                ("global", 0.5 * spread),
+                ("full", 0.05 * spread),
+                ("global", 2.5 * spread),
+                ("full", 4.0 * spread),
+                ("full", 0.7 * spread),
+                ("global", 0.2 * spread),
+            ]
+        )
+    ] + [(0, "full", 0.3 * spread), (0, "full", 3.0 * spread), (1, "full", 0.6 * spread)]
+    seen_partial = 0
+    for m, which, distance in asked:
+        got = context.evaluate(motions[m], distance, which)
+        source_cloud, target_cloud = context.clouds(which)
+        with repeatable_open3d():  # Open3D's sums in one order, as the context runs it
+            want = o3d.pipelines.registration.evaluate_registration(
+                source_cloud, target_cloud, distance, motions[m]
+            )
+        assert got.fitness == want.fitness and got.inlier_rmse == want.inlier_rmse
+        np.testing.assert_array_equal(got.correspondence_set, np.asarray(want.correspondence_set))
+        seen_partial += 0.0 < got.fitness < 1.0
+    assert seen_partial >= 5  # the distances cut through the clouds, not around them
+    assert len(context._nearest) <= 8

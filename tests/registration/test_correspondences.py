@@ -79,6 +79,56 @@ def test_correspondence_bad_input(kwargs, message):
         find_correspondences(**kwargs)
 
 
+def _tied_descriptors(dtype, n, m, seed):
+    """Two descriptor sets with exact partners, duplicated rows and many ties (values
+    on a half-integer grid)."""
+    rng = np.random.default_rng(seed)
+    a = np.round(rng.normal(size=(n, 6)) * 2) / 2
+    b = np.round(rng.normal(size=(m, 6)) * 2) / 2
+    b[: min(n, m) // 2] = a[: min(n, m) // 2]
+    a[1] = a[0]
+    b[3] = b[2]
+    return a.astype(dtype), b.astype(dtype)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("n, m, k, k_back", [(200, 260, 2, 2), (260, 200, 1, 3), (5, 4, 3, 2)])
+@pytest.mark.parametrize("chunk", [None, 3000])
+def test_both_ways_are_the_two_one_way_searches(dtype, n, m, k, k_back, chunk, monkeypatch):
+    """One pass over the distances gives both directions' neighbours, bit for bit as
+    two calls give them (ties included, over several blocks of rows, and where every
+    row is a candidate)."""
+    from o3d_rpointhop.registration import correspondences as module
+
+    if chunk is not None:
+        monkeypatch.setattr(module, "_CHUNK_ELEMENTS", chunk)
+    a, b = _tied_descriptors(dtype, n, m, seed=n + k)
+    (idx, dist), (back_idx, back_dist) = module.nearest_both_ways(a, b, k, k_back)
+    one_idx, one_dist = module.nearest_descriptors(a, b, k)
+    two_idx, two_dist = module.nearest_descriptors(b, a, k_back)
+    np.testing.assert_array_equal(idx, one_idx)
+    np.testing.assert_array_equal(dist, one_dist)
+    np.testing.assert_array_equal(back_idx, two_idx)
+    np.testing.assert_array_equal(back_dist, two_dist)
+    assert back_idx.shape == (m, min(k_back, n))
+
+
+def test_matches_both_ways_are_the_two_calls_matches():
+    from o3d_rpointhop.registration.correspondences import correspondences_both_ways
+
+    a, b = _tied_descriptors(np.float32, 300, 250, seed=3)
+    for ratio in (None, 0.9):
+        forward, backward = correspondences_both_ways(a, b, max_ratio=ratio)
+        for got, want in (
+            (forward, find_correspondences(a, b, max_ratio=ratio)),
+            (backward, find_correspondences(b, a, max_ratio=ratio)),
+        ):
+            np.testing.assert_array_equal(got.pairs, want.pairs)
+            np.testing.assert_array_equal(got.distances, want.distances)
+            np.testing.assert_array_equal(got.ratios, want.ratios)
+    assert len(correspondences_both_ways(a, b, max_ratio=0.9)[0]) < 300
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_the_compiled_candidates_are_the_argmin_passes(dtype, monkeypatch):
     """Large distance blocks take their candidates from one compiled pass per row: the

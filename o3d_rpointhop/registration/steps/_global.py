@@ -205,6 +205,10 @@ class GlobalStep(RegistrationStep):
         else:
             src, tgt = self._describe(context)
             corr = find_correspondences(src, tgt, **filters)
+        return self._filters_left_enough(corr)
+
+    def _filters_left_enough(self, corr: Correspondences) -> Correspondences:
+        """``corr``, refused (:meth:`_enough`) when the filters left fewer than 3."""
         self._enough(
             len(corr),
             "correspondences survived the filters",

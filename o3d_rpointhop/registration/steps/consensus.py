@@ -13,7 +13,7 @@ from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..correspondences import (
     Correspondences,
-    find_correspondences,
+    correspondences_both_ways,
     k_best_correspondences,
     salient,
     turned_correspondences,
@@ -211,18 +211,23 @@ class ConsensusGlobal(GlobalStep):
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
         filters = dict(mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
+        src, tgt = self._describe(context)
+        both_ways = self.both_directions and not self.mutual_filter
+        back = None
         if self.n_nearest > 1:
-            corr = k_best_correspondences(*self._describe(context), self.n_nearest)
+            corr = k_best_correspondences(src, tgt, self.n_nearest)
+        elif both_ways and self.frame_turns == 1:
+            # Both directions from one pass over the descriptors' distances.
+            corr, back = correspondences_both_ways(src, tgt, max_ratio=self.max_ratio)
+            self._filters_left_enough(corr)
         else:
             corr = self._correspond(context, **filters)
-        src, tgt = self._describe(context)
-        if self.both_directions and not self.mutual_filter:
+        if both_ways and back is None:
             if self.frame_turns > 1:
                 back = turned_correspondences(tgt, self._turned(context)[0])
-            elif self.n_nearest > 1:
-                back = k_best_correspondences(tgt, src, self.n_nearest)
             else:
-                back = find_correspondences(tgt, src, **filters)
+                back = k_best_correspondences(tgt, src, self.n_nearest)
+        if both_ways:
             both = Correspondences(
                 np.concatenate([corr.pairs, back.pairs[:, ::-1]]),
                 np.concatenate([corr.distances, back.distances]),
