@@ -221,3 +221,17 @@ def global_step_only(step, source, target, descriptor):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RegistrationWarning)
         return pipeline.register(source, target)
+
+
+def moved_part(rng, shape_seed: int, euler_zyx_deg, shift, n_points: int = 600, n_kept: int = 500):
+    """An object of ``n_points`` and ``n_kept`` of them (drawn by ``rng``) moved:
+    ``(source, target, truth, keep)``, ``truth`` mapping each source point onto
+    ``target[keep]``."""
+    from o3d_rpointhop.transforms import apply_transform
+
+    target = make_object(n_points, shape_seed=shape_seed, sample_seed=0)
+    keep = rng.permutation(n_points)[:n_kept]
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_euler("zyx", euler_zyx_deg, degrees=True).as_matrix()
+    truth[:3, 3] = shift
+    return apply_transform(target[keep], np.linalg.inv(truth)), target, truth, keep

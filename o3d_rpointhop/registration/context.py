@@ -316,7 +316,9 @@ class RegistrationContext:
     ) -> StepResult:
         """Fitness, inlier RMSE and inlier pairs of ``transformation`` (centred frame)
         within ``max_correspondence_distance``, on the full-resolution clouds
-        (``which="full"``) or the global step's (``"global"``)."""
+        (``which="full"``) or the global step's (``"global"``): Open3D's
+        ``evaluate_registration``, with one search per transformation however many
+        distances it is measured at (:meth:`_inliers_within`)."""
         distance = float(max_correspondence_distance)
         transformation = np.array(transformation, dtype=np.float64)
         pairs, squared = self._inliers_within(transformation, distance, which)

@@ -207,7 +207,7 @@ class _ColumnCandidates:
     def add(self, block, ref_sq, start: int, n_row: int) -> np.ndarray:
         """Take a block's columns' candidates; return its rows' ``n_row`` candidates."""
         every_row = n_row >= block.shape[1]
-        two = np.full(1, -2.0, dtype=block.dtype)
+        minus_two = np.full(1, -2.0, dtype=block.dtype)
         row_cand = _candidates_both_ways(
             block,
             ref_sq,
@@ -218,7 +218,7 @@ class _ColumnCandidates:
             self.values,
             self.rows,
             self.kept,
-            two,
+            minus_two,
         )
         return _all_columns(block.shape, n_row) if every_row else row_cand
 
@@ -275,67 +275,57 @@ def _smallest_rows(values, n):  # pragma: no cover - compiled
         kept = 0
         for j in range(m):
             v = values[i, j]
-            if kept == n and not v < best[n - 1]:
-                continue
-            r = kept if kept < n else n - 1
-            while r > 0 and v < best[r - 1]:
-                best[r] = best[r - 1]
-                out[i, r] = out[i, r - 1]
-                r -= 1
-            best[r] = v
-            out[i, r] = j
-            if kept < n:
-                kept += 1
+            if kept < n or v < best[n - 1]:
+                kept = _keep_smallest(best, out[i], kept, v, j)
     return out
+
+
+@kernel(inline="always")
+def _keep_smallest(values, rows, kept, v, index):  # pragma: no cover - compiled
+    """Put ``v`` (of row or column ``index``) into the ascending list ``values[:kept]``
+    / ``rows[:kept]`` of at most ``len(values)``, after every value it does not beat
+    (the last one dropped when the list is full); the caller checked that it belongs
+    there. Returns the list's new length."""
+    n = values.shape[0]
+    r = kept if kept < n else n - 1
+    while r > 0 and v < values[r - 1]:
+        values[r] = values[r - 1]
+        rows[r] = rows[r - 1]
+        r -= 1
+    values[r] = v
+    rows[r] = index
+    return kept + 1 if kept < n else kept
 
 
 @kernel()
 def _candidates_both_ways(
-    block, ref_sq, query_sq, n_row, first, n_col, col_values, col_rows, col_kept, two
+    block, ref_sq, query_sq, n_row, first, n_col, col_values, col_rows, col_kept, minus_two
 ):  # pragma: no cover - compiled
     """One pass over a block of products ``q . r`` (rows: queries ``first`` on): each
     row's ``n_row`` smallest of ``-2 q.r + |r|^2`` (returned, ``(rows, n_row)``; none
     when ``n_row`` is 0) and, into the running lists ``col_values`` / ``col_rows`` /
     ``col_kept``, each column's ``n_col`` smallest of ``-2 q.r + |q|^2`` (none when 0).
-    ``two`` holds -2 in the block's dtype, so each value is computed in that dtype as
-    the numpy passes compute it. Both keep a newcomer after the ones it does not beat:
+    ``minus_two`` holds -2 in the block's dtype, so each value is computed in that dtype
+    as the numpy passes compute it. Both keep a newcomer after the ones it does not beat:
     value, then index, as :func:`_smallest`."""
     q, m = block.shape
     out = np.empty((q, max(n_row, 1)), dtype=np.int64)
     best = np.empty(max(n_row, 1), dtype=block.dtype)
-    factor = two[0]
+    factor = minus_two[0]
     for i in range(q):
         kept = 0
         own = query_sq[i]
-        row = first + i
         for j in range(m):
             g = block[i, j] * factor
             if n_col:
                 w = g + own
                 c = col_kept[j]
                 if c < n_col or w < col_values[j, n_col - 1]:
-                    r = c if c < n_col else n_col - 1
-                    while r > 0 and w < col_values[j, r - 1]:
-                        col_values[j, r] = col_values[j, r - 1]
-                        col_rows[j, r] = col_rows[j, r - 1]
-                        r -= 1
-                    col_values[j, r] = w
-                    col_rows[j, r] = row
-                    if c < n_col:
-                        col_kept[j] = c + 1
+                    col_kept[j] = _keep_smallest(col_values[j], col_rows[j], c, w, first + i)
             if n_row:
                 v = g + ref_sq[j]
-                if kept == n_row and not v < best[n_row - 1]:
-                    continue
-                r = kept if kept < n_row else n_row - 1
-                while r > 0 and v < best[r - 1]:
-                    best[r] = best[r - 1]
-                    out[i, r] = out[i, r - 1]
-                    r -= 1
-                best[r] = v
-                out[i, r] = j
-                if kept < n_row:
-                    kept += 1
+                if kept < n_row or v < best[n_row - 1]:
+                    kept = _keep_smallest(best, out[i], kept, v, j)
     return out
 
 

@@ -92,7 +92,9 @@ def _tied_descriptors(dtype, n, m, seed):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("n, m, k, k_back", [(200, 260, 2, 2), (260, 200, 1, 3), (5, 4, 3, 2)])
+@pytest.mark.parametrize(
+    "n, m, k, k_back", [(200, 260, 2, 2), (200, 260, 2, 1), (260, 200, 1, 3), (5, 4, 3, 2)]
+)
 @pytest.mark.parametrize("chunk", [None, 3000])
 def test_both_ways_are_the_two_one_way_searches(dtype, n, m, k, k_back, chunk, monkeypatch):
     """One pass over the distances gives both directions' neighbours, bit for bit as

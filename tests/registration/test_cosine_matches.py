@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import CodesBySize, TurnedCodesBySize, global_step_only, moved_samples
-from scipy.spatial.transform import Rotation
+from helpers import CodesBySize, TurnedCodesBySize, global_step_only, moved_part, moved_samples
 
 from o3d_rpointhop import ConsensusGlobal, RANSACGlobal, register
 from o3d_rpointhop.datasets import make_object
@@ -33,13 +32,7 @@ def test_unit_rows_scale_every_descriptor_to_unit_length():
 def _moved_part():
     """An object of 600 points, 500 of them moved: the source, the target, the motion
     and which target point each source point is."""
-    rng = np.random.default_rng(4)
-    target = make_object(600, shape_seed=3, sample_seed=0)
-    keep = rng.permutation(600)[:500]
-    truth = np.eye(4)
-    truth[:3, :3] = Rotation.from_euler("zyx", [-70, 30, 15], degrees=True).as_matrix()
-    truth[:3, 3] = [0.3, -0.1, 0.2]
-    return apply_transform(target[keep], np.linalg.inv(truth)), target, truth, keep
+    return moved_part(np.random.default_rng(4), 3, [-70, 30, 15], [0.3, -0.1, 0.2])
 
 
 def _lengths(rng, n):

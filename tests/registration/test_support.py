@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import CodesBySize, global_step_only
-from scipy.spatial.transform import Rotation
+from helpers import CodesBySize, global_step_only, moved_part
 
 from o3d_rpointhop import ConsensusGlobal, RANSACGlobal, RegistrationResult, register
-from o3d_rpointhop.datasets import make_object
-from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
+from o3d_rpointhop.transforms import rotation_error_deg
 
 
 def _planted(n_right: int):
@@ -18,12 +16,7 @@ def _planted(n_right: int):
     source points share a code with their true partner, the others with a target point
     far from theirs (a wrong match each)."""
     rng = np.random.default_rng(8)
-    target = make_object(600, shape_seed=5, sample_seed=0)
-    keep = rng.permutation(600)[:500]
-    truth = np.eye(4)
-    truth[:3, :3] = Rotation.from_euler("zyx", [40, -25, 60], degrees=True).as_matrix()
-    truth[:3, 3] = [0.2, 0.1, -0.3]
-    source = apply_transform(target[keep], np.linalg.inv(truth))
+    source, target, truth, keep = moved_part(rng, 5, [40, -25, 60], [0.2, 0.1, -0.3])
     tgt = rng.normal(size=(600, 8))
     partner = keep.copy()
     # A wrong partner: the target point farthest from the true one among ten drawn.

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import TurnedCodesBySize, global_step_only, moved_samples
-from scipy.spatial.transform import Rotation
+from helpers import TurnedCodesBySize, global_step_only, moved_part, moved_samples
 
 from o3d_rpointhop import (
     ConsensusGlobal,
@@ -51,12 +50,7 @@ def _pair_whose_frames_agree_after_a_turn():
     partner's plain frame does (and the source's turned by three quarters, the other
     way round): only matches over turns find the partners."""
     rng = np.random.default_rng(3)
-    target = make_object(600, shape_seed=2, sample_seed=0)
-    keep = rng.permutation(600)[:500]
-    truth = np.eye(4)
-    truth[:3, :3] = Rotation.from_euler("zyx", [50, -20, 10], degrees=True).as_matrix()
-    truth[:3, 3] = [0.2, 0.1, -0.3]
-    source = apply_transform(target[keep], np.linalg.inv(truth))
+    source, target, truth, keep = moved_part(rng, 2, [50, -20, 10], [0.2, 0.1, -0.3])
     dim = 8
     src = rng.normal(size=(4, 500, dim))
     tgt = rng.normal(size=(4, 600, dim))
