@@ -217,8 +217,8 @@ def test_evaluations_are_open3ds_to_the_bit_whatever_the_order():
     from o3d_rpointhop.registration.context import RegistrationContext
 
     rng = np.random.default_rng(3)
-    target = make_object(3000, shape_seed=9, sample_seed=1) * 2.0
-    source = make_object(2500, shape_seed=9, sample_seed=2) * 2.0 + [0.01, -0.02, 0.0]
+    target = make_object(6000, shape_seed=9, sample_seed=1) * 2.0
+    source = make_object(5500, shape_seed=9, sample_seed=2) * 2.0 + [0.01, -0.02, 0.0]
     context = RegistrationContext(source, target, n_global_points=800)
     spread = context.settings.spread_distance
     motions = [np.eye(4)]
