@@ -314,6 +314,8 @@ class RegistrationResult:
             "distance": self.distance,
             "converged": self.converged,
             "ambiguous": self.ambiguous,
+            "support": self.support,
+            "margin": self.margin,
             "seconds": self.seconds,
             "preparation_seconds": self.preparation_seconds,
             "steps": [s.as_dict() for s in self.steps],

@@ -52,3 +52,7 @@ def test_support_is_none_without_a_global_step_and_kept_by_save(tmp_path):
     result.save(tmp_path / "result.json")
     loaded = RegistrationResult.load(tmp_path / "result.json")
     assert loaded.support == result.support
+    # The summary (the command line's --json output) names it, and the margin.
+    summary = result.as_dict()
+    assert summary["support"] == result.support and summary["margin"] is None
+    assert icp_only.as_dict()["support"] is None
