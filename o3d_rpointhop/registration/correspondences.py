@@ -420,10 +420,11 @@ def find_correspondences(
 
 
 def correspondences_both_ways(
-    source_features, target_features, *, max_ratio: float | None = None
+    source_features, target_features, *, max_ratio: float | None = None, k: int = 1
 ) -> tuple[Correspondences, Correspondences]:
     """``find_correspondences(source, target)`` and ``find_correspondences(target,
-    source)`` (each with ``max_ratio``) from one pass over the descriptors' distances
+    source)`` (each with ``max_ratio``), or with ``k`` above 1 the two directions'
+    :func:`k_best_correspondences`, from one pass over the descriptors' distances
     (:func:`nearest_both_ways`): the same matches as the two calls, for half the
     products.
 
@@ -432,7 +433,14 @@ def correspondences_both_ways(
     forward, backward : Correspondences
         Source to target; target to source (pairs ``(target index, source index)``).
     """
+    k = _checked_k(k)
+    if k > 1 and max_ratio is not None:
+        raise ValueError("max_ratio is defined on the nearest descriptor alone: not with k > 1")
     src, tgt = _feature_pair(source_features, target_features)
+    if k > 1:
+        k_src, k_tgt = min(k, len(tgt)), min(k, len(src))
+        (idx, dist), (back_idx, back_dist) = nearest_both_ways(src, tgt, k_src + 1, k_tgt + 1)
+        return _k_best(idx, dist, k_src), _k_best(back_idx, back_dist, k_tgt)
     (idx, dist), (back_idx, back_dist) = nearest_both_ways(src, tgt, k=2, k_back=2)
     forward = _filtered(idx, dist, None, None, max_ratio, None, None)
     return forward, _filtered(back_idx, back_dist, None, None, max_ratio, None, None)
@@ -486,17 +494,30 @@ def k_best_correspondences(source_features, target_features, k: int) -> Correspo
         Sorted by source index, then nearest first; each match's ratio is its distance
         over the next nearest's.
     """
+    k = _checked_k(k)
+    src, tgt = _feature_pair(source_features, target_features)
+    k = min(k, len(tgt))
+    idx, dist = nearest_descriptors(src, tgt, k=k + 1)
+    return _k_best(idx, dist, k)
+
+
+def _checked_k(k) -> int:
+    """A k-best count: an int of at least 1, else a clear error."""
     if isinstance(k, bool) or not isinstance(k, Integral) or k < 1:
         raise ValueError(f"k must be an int >= 1, got {k!r}")
-    src, tgt = _feature_pair(source_features, target_features)
-    k = min(int(k), len(tgt))
-    idx, dist = nearest_descriptors(src, tgt, k=k + 1)
+    return int(k)
+
+
+def _k_best(idx, dist, k: int) -> Correspondences:
+    """Every query's ``k`` nearest rows as matches, from its ``k + 1`` nearest (fewer
+    where the references run out) ``idx`` / ``dist``: each ratio is the distance over
+    the next nearest's."""
     if dist.shape[1] == k:  # no next nearest: the last match's ratio is 1
         dist = np.c_[dist, dist[:, -1:]]
     d, following = dist[:, :k], dist[:, 1 : k + 1]
     ratio = np.divide(d, following, out=np.ones_like(d), where=following > 0)
     return Correspondences(
-        pairs=np.c_[np.repeat(np.arange(len(src)), k), idx[:, :k].ravel()].astype(np.int64),
+        pairs=np.c_[np.repeat(np.arange(len(idx)), k), idx[:, :k].ravel()].astype(np.int64),
         distances=d.ravel(),
         ratios=ratio.ravel(),
     )

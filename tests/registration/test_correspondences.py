@@ -116,7 +116,10 @@ def test_both_ways_are_the_two_one_way_searches(dtype, n, m, k, k_back, chunk, m
 
 
 def test_matches_both_ways_are_the_two_calls_matches():
-    from o3d_rpointhop.registration.correspondences import correspondences_both_ways
+    from o3d_rpointhop.registration.correspondences import (
+        correspondences_both_ways,
+        k_best_correspondences,
+    )
 
     a, b = _tied_descriptors(np.float32, 300, 250, seed=3)
     for ratio in (None, 0.9):
@@ -129,6 +132,19 @@ def test_matches_both_ways_are_the_two_calls_matches():
             np.testing.assert_array_equal(got.distances, want.distances)
             np.testing.assert_array_equal(got.ratios, want.ratios)
     assert len(correspondences_both_ways(a, b, max_ratio=0.9)[0]) < 300
+    for k in (2, 3):  # k-best both ways: the two directions' k_best_correspondences
+        forward, backward = correspondences_both_ways(a, b, k=k)
+        for got, want in (
+            (forward, k_best_correspondences(a, b, k)),
+            (backward, k_best_correspondences(b, a, k)),
+        ):
+            np.testing.assert_array_equal(got.pairs, want.pairs)
+            np.testing.assert_array_equal(got.distances, want.distances)
+            np.testing.assert_array_equal(got.ratios, want.ratios)
+    with pytest.raises(ValueError, match="max_ratio"):
+        correspondences_both_ways(a, b, max_ratio=0.9, k=2)
+    with pytest.raises(ValueError, match="k must be an int"):
+        correspondences_both_ways(a, b, k=0)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])

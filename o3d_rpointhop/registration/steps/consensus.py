@@ -210,24 +210,25 @@ class ConsensusGlobal(GlobalStep):
 
     def _matches(self, context: RegistrationContext) -> Correspondences:
         """The matches the graph is built on (source index, target index)."""
-        filters = dict(mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
         src, tgt = self._describe(context)
         both_ways = self.both_directions and not self.mutual_filter
         back = None
-        if self.n_nearest > 1:
-            corr = k_best_correspondences(src, tgt, self.n_nearest)
-        elif both_ways and self.frame_turns == 1:
+        if both_ways and self.frame_turns == 1:
             # Both directions from one pass over the descriptors' distances.
-            corr, back = correspondences_both_ways(src, tgt, max_ratio=self.max_ratio)
-            self._filters_left_enough(corr)
+            corr, back = correspondences_both_ways(
+                src, tgt, max_ratio=self.max_ratio, k=self.n_nearest
+            )
+            if self.n_nearest == 1:
+                self._filters_left_enough(corr)
+        elif self.n_nearest > 1:
+            corr = k_best_correspondences(src, tgt, self.n_nearest)
         else:
-            corr = self._correspond(context, **filters)
-        if both_ways and back is None:
-            if self.frame_turns > 1:
+            corr = self._correspond(
+                context, mutual_filter=self.mutual_filter, max_ratio=self.max_ratio
+            )
+            if both_ways:  # over turns
                 back = turned_correspondences(tgt, self._turned(context)[0])
-            else:
-                back = k_best_correspondences(tgt, src, self.n_nearest)
-        if both_ways:
+        if back is not None:
             both = Correspondences(
                 np.concatenate([corr.pairs, back.pairs[:, ::-1]]),
                 np.concatenate([corr.distances, back.distances]),
