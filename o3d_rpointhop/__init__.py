@@ -23,6 +23,7 @@ logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 #: Every re-exported name and the module that defines it.
 _EXPORTS = {
+    "DescriptorUnion": "descriptors",
     "FPFHTransformer": "descriptors",
     "RPointHopTransformer": "descriptors",
     "to_open3d_feature": "open3d_interop",
@@ -58,6 +59,7 @@ _EXPORTS = {
 __all__ = [
     "ConsensusGlobal",
     "Correspondences",
+    "DescriptorUnion",
     "FGRGlobal",
     "FPFHTransformer",
     "GeneralizedICP",
@@ -104,7 +106,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # what type checkers and IDEs see
-    from .descriptors import FPFHTransformer, RPointHopTransformer
+    from .descriptors import DescriptorUnion, FPFHTransformer, RPointHopTransformer
     from .open3d_interop import to_open3d_feature, to_point_cloud
     from .registration import (
         ConsensusGlobal,

@@ -1,10 +1,11 @@
 """Point descriptors behind one scikit-learn interface: :class:`RPointHopTransformer`
-(learned, rotation-invariant) and :class:`FPFHTransformer` (Open3D's FPFH).
+(learned, rotation-invariant), :class:`FPFHTransformer` (Open3D's FPFH) and
+:class:`DescriptorUnion` (several side by side).
 
-Private modules, in the manner of ``sklearn.decomposition``: :mod:`._base` (what both
-share), :mod:`._rpointhop` and :mod:`._fpfh` (the estimators), :mod:`._pretrained` (the
-shipped models), :mod:`._persistence` (the model file format), :mod:`._identity` (what a record
-calls a descriptor) and the subpackage
+Private modules, in the manner of ``sklearn.decomposition``: :mod:`._base` (what the
+two point descriptors share), :mod:`._rpointhop`, :mod:`._fpfh` and :mod:`._union` (the
+estimators), :mod:`._pretrained` (the shipped models), :mod:`._persistence` (the model
+file format), :mod:`._identity` (what a record calls a descriptor) and the subpackage
 :mod:`.pointhop` (the R-PointHop maths, free of scikit-learn).
 """
 
@@ -14,9 +15,11 @@ from ._identity import descriptor_identity
 from ._persistence import content_hash
 from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS
 from ._rpointhop import RPointHopTransformer
+from ._union import DescriptorUnion
 
 __all__ = [
     "BaseDescriptor",
+    "DescriptorUnion",
     "FEATURE_RADIUS_FACTOR",
     "FPFHTransformer",
     "NORMAL_RADIUS_FACTOR",

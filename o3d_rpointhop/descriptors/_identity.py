@@ -10,6 +10,7 @@ from ._fpfh import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR, FPFHTransformer
 from ._persistence import content_hash
 from ._pretrained import PRETRAINED_MODELS
 from ._rpointhop import RPointHopTransformer
+from ._union import DescriptorUnion
 
 __all__ = ["descriptor_identity"]
 
@@ -33,8 +34,16 @@ def descriptor_identity(descriptor: Any) -> dict:
     number of axes) or ``"fitted"``, its :func:`content_hash`, its descriptor size, its
     parameters and, when it has them, the scenes it was fitted on. An
     :class:`FPFHTransformer`: its class, parameters and the radii's multiples of the
-    resolution. Anything else: its class and, for an estimator, its parameters.
+    resolution. A :class:`DescriptorUnion`: each part's identity by name, and the weights.
+    Anything else: its class and, for an estimator, its parameters.
     """
+    if isinstance(descriptor, DescriptorUnion):
+        parts = descriptor.transformer_list
+        return {
+            "class": "o3d_rpointhop.DescriptorUnion",
+            "parts": {name: descriptor_identity(part) for name, part in parts},
+            "transformer_weights": json_safe(descriptor.transformer_weights),
+        }
     if isinstance(descriptor, RPointHopTransformer):
         digest = content_hash(descriptor)
         out = {

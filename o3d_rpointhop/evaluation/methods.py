@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
-from ..descriptors import FPFHTransformer, RPointHopTransformer
+from ..descriptors import DescriptorUnion, FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration import ConsensusGlobal, RANSACGlobal, register
 from .peers import (
@@ -41,9 +41,11 @@ __all__ = [
     "DATASETS",
     "METHODS",
     "Method",
+    "SCENE_FPFH_WEIGHT",
     "default_methods",
     "check_methods",
     "claimed_by",
+    "scene_with_fpfh",
     "shipped_scene_model",
 ]
 
@@ -53,6 +55,21 @@ reg = o3d.pipelines.registration
 def shipped_scene_model():
     """The shipped scene model (``pretrained()`` reads its file once per process)."""
     return RPointHopTransformer.pretrained("scene")
+
+
+#: FPFH's weight beside the scene model in :func:`scene_with_fpfh` (each part's rows at
+#: unit length), chosen on every official 3DMatch pair of the scene model's training
+#: scenes among 0.5, 0.7 and 1 (docs/registration.md).
+SCENE_FPFH_WEIGHT = 0.7
+
+
+def scene_with_fpfh() -> DescriptorUnion:
+    """The shipped scene model and FPFH side by side, FPFH weighing
+    :data:`SCENE_FPFH_WEIGHT`."""
+    return DescriptorUnion(
+        [("rpointhop", shipped_scene_model()), ("fpfh", FPFHTransformer())],
+        transformer_weights={"fpfh": SCENE_FPFH_WEIGHT},
+    )
 
 
 #: The pair datasets a method can be run on (multiway has its own descriptor list).
@@ -83,9 +100,10 @@ class Method:
         The R-PointHop model it describes with: the benchmark's (``"given"``), the
         shipped scene model, each pair's leave-one-scene-out model, the Open3D recipe's
         model (:func:`open3d_recipe_descriptor`: the object model), or none.
-    descriptor : {"rpointhop", "fpfh", "open3d-fpfh", "kiss-matcher", "none"}
+    descriptor : {"rpointhop", "fpfh", "union", "open3d-fpfh", "kiss-matcher", "none"}
         What describes the points: R-PointHop (``model`` says which), this library's
-        ``FPFHTransformer``, Open3D's FPFH as its tutorial computes it, KISS-Matcher's
+        ``FPFHTransformer``, a ``DescriptorUnion`` the method builds (its runner's
+        ``describe_with``), Open3D's FPFH as its tutorial computes it, KISS-Matcher's
         own, or nothing (ICP alone). Records name it (:mod:`.provenance`).
     open3d_only : bool
         Open3D calls from end to end (a recipe).
@@ -230,6 +248,7 @@ def _register_with(describe_with: Callable[[], Any] | None = None, **options):
         return register(source, target, used, seed=seed, viewpoints=viewpoints, **chosen)
 
     run.options = options  # what the records name (provenance)
+    run.describe_with = describe_with
     return run
 
 
@@ -376,6 +395,25 @@ METHODS = _methods(
         _register_with(global_method=consensus_turns),
         datasets=_SCENES,
         model="scene",
+    ),
+    Method(
+        "rpointhop-scene-fpfh",
+        "R-PointHop, shipped scene model, and FPFH side by side (DescriptorUnion, FPFH "
+        "weighing 0.7), register() defaults (consensus) + point-to-plane ICP",
+        _register_with(scene_with_fpfh),
+        datasets=_SCENES,
+        model="scene",
+        descriptor="union",
+    ),
+    Method(
+        "rpointhop-scene-fpfh-turns",
+        "R-PointHop, shipped scene model, and FPFH side by side (DescriptorUnion, FPFH "
+        "weighing 0.7), consensus on matches over every quarter turn of the local frames "
+        "(frame_turns=4) + point-to-plane ICP",
+        _register_with(scene_with_fpfh, global_method=consensus_turns),
+        datasets=_SCENES,
+        model="scene",
+        descriptor="union",
     ),
     Method(
         "rpointhop-scene-half-turns",

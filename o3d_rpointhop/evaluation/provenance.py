@@ -76,7 +76,9 @@ def _method_entry(name: str, given: RPointHopTransformer, loso: dict, identity) 
         entry["options"] = json_safe(
             {k: getattr(v, "__name__", v) if callable(v) else v for k, v in options.items()}
         )
-    if method.model == "given":
+    if method.descriptor == "union":
+        entry["descriptor"] = descriptor_identity(method.run.describe_with())
+    elif method.model == "given":
         entry["descriptor"] = identity(given)
     elif method.model == "scene":
         entry["descriptor"] = identity(shipped_scene_model())

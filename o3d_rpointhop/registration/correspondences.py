@@ -8,10 +8,10 @@ from numbers import Integral, Real
 
 import numpy as np
 import open3d as o3d
-from sklearn.preprocessing import normalize
 
 from .._utils.compiled import kernel
 from .._utils.params import Interval, validate_params
+from ..descriptors._union import unit_rows
 
 __all__ = [
     "SALIENT_NEIGHBOURS",
@@ -560,24 +560,6 @@ def turned_correspondences(source_features, target_turns) -> Correspondences:
         distances=d1,
         ratios=ratio,
     )
-
-
-def unit_rows(features) -> np.ndarray:
-    """Descriptors scaled to unit length along their last axis, so that their Euclidean
-    distances order pairs as their cosine distances do (a zero descriptor stays zero).
-
-    Parameters
-    ----------
-    features : array-like of shape (..., dim)
-        Descriptors, one per row (``(n_turns, n, dim)`` for turned descriptors).
-
-    Returns
-    -------
-    ndarray of the same shape and floating dtype
-    """
-    features = np.asarray(features)
-    flat = features.reshape(-1, features.shape[-1])
-    return normalize(flat, norm="l2", copy=True).reshape(features.shape)
 
 
 def distinctiveness(features: np.ndarray, k: int = SALIENT_NEIGHBOURS) -> np.ndarray:
