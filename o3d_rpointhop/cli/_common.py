@@ -30,7 +30,7 @@ EXIT_CODES = f"""exit status:
 #: Largest output written without --force.
 MAX_OUTPUT_BYTES = 512 * 1024**2
 #: What ``--descriptor`` names.
-DESCRIPTORS = ("rpointhop", "fpfh")
+DESCRIPTORS = ("rpointhop", "fpfh", "rpointhop+fpfh")
 
 
 class CommandError(Exception):
@@ -110,7 +110,9 @@ def add_descriptor(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--descriptor",
         choices=DESCRIPTORS,
-        help="rpointhop (the model of --model; the default) or fpfh (radii from the resolution)",
+        help="rpointhop (the model of --model; the default), fpfh (radii from the "
+        "resolution) or rpointhop+fpfh (both side by side, FPFH weighing [descriptor] "
+        "fpfh_weight, 0.7)",
     )
 
 

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ._common import CommandError, UsageError
+from ._common import DESCRIPTORS, CommandError, UsageError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -49,6 +49,7 @@ DESCRIPTOR_KEYS: dict[str, Any] = {
     "model": None,
     "n_components": None,
     "n_jobs": None,
+    "fpfh_weight": None,
 }
 # Step parameters a file cannot give (objects, not values).
 _OBJECT_PARAMETERS = {"descriptor", "refine"}
@@ -328,49 +329,86 @@ def descriptor_from(
     names it (with ``"fpfh"``: FPFH's parameters).
 
     Flags (``--descriptor``, ``--model``, ``--n-components``; ``None`` when not given)
-    win over ``[descriptor]``; ``[fpfh]`` configures FPFH. ``None`` as the descriptor
+    win over ``[descriptor]``; ``[fpfh]`` configures FPFH. ``"rpointhop+fpfh"``: the
+    model and FPFH side by side (:class:`~o3d_rpointhop.DescriptorUnion`), FPFH weighing
+    ``fpfh_weight`` (:data:`~o3d_rpointhop.registration.defaults.SCENE_FPFH_WEIGHT`
+    unless given). ``None`` as the descriptor
     leaves the choice to the library (its default descriptor), unless axes or threads
     are set, which then apply to that default. ``registering``: the paper's model
     (``modelnet40``) comes on the 128 axes registration matches; otherwise (``describe``)
     as ``pretrained()`` gives it, and the default is the paper's model.
     """
-    from ._common import load_model
-
     section = {**DESCRIPTOR_KEYS, **config.get("descriptor", {})}
     for key, value in (("kind", kind), ("model", model), ("n_components", n_components)):
         if value is not None:
             section[key] = value
-    if section["kind"] not in ("rpointhop", "fpfh"):
+    if section["kind"] not in DESCRIPTORS:
         raise UsageError(
-            f"[descriptor]: kind must be 'rpointhop' or 'fpfh', got {section['kind']!r}"
+            f"[descriptor]: kind must be one of {', '.join(map(repr, DESCRIPTORS))}, "
+            f"got {section['kind']!r}"
         )
-    n_jobs = section["n_jobs"]
+    if section["fpfh_weight"] is not None and section["kind"] != "rpointhop+fpfh":
+        raise UsageError("[descriptor]: fpfh_weight applies to the rpointhop+fpfh descriptor")
     if section["kind"] == "fpfh":
-        from ..descriptors import FPFHTransformer
-
         if section["model"] is not None:
             raise CommandError("--model applies to the rpointhop descriptor, not fpfh")
-        params = dict(config.get("fpfh", {}))
-        descriptor = FPFHTransformer(**params, **({} if n_jobs is None else {"n_jobs": n_jobs}))
+        fpfh = _fpfh_from(config, section["n_jobs"])
+        return fpfh, {**section, "fpfh": estimator_section(fpfh)}
+    if section["kind"] == "rpointhop+fpfh":
+        from ..descriptors import DescriptorUnion
+        from ..registration.defaults import SCENE_FPFH_WEIGHT
+
+        if section["model"] is None:
+            from ..registration.defaults import DEFAULT_MODEL
+
+            section["model"] = DEFAULT_MODEL if registering else "modelnet40"
+        if section["fpfh_weight"] is None:
+            section["fpfh_weight"] = SCENE_FPFH_WEIGHT
+        fpfh = _fpfh_from(config, section["n_jobs"])
+        union = DescriptorUnion(
+            [("rpointhop", _rpointhop_from(section, registering)), ("fpfh", fpfh)],
+            transformer_weights={"fpfh": section["fpfh_weight"]},
+        )
         try:
-            descriptor._validate_params()
-        except (ValueError, TypeError) as exc:
-            raise UsageError(f"[fpfh]: {exc}") from None
-        return descriptor, {**section, "fpfh": estimator_section(descriptor)}
-    name = section["model"]
-    if not registering and name is None:
-        name = section["model"] = "modelnet40"
+            union._parts()
+        except ValueError as exc:
+            raise UsageError(f"[descriptor]: {exc}") from None
+        return union, {**section, "fpfh": estimator_section(fpfh)}
+    if not registering and section["model"] is None:
+        section["model"] = "modelnet40"
+    if section["model"] is None and section["n_components"] is None and section["n_jobs"] is None:
+        return None, section
+    if section["model"] is None:
+        from ..registration.defaults import DEFAULT_MODEL
+
+        section["model"] = DEFAULT_MODEL
+    return _rpointhop_from(section, registering), section
+
+
+def _fpfh_from(config: dict[str, dict], n_jobs: int | None) -> Any:
+    """FPFH as ``[fpfh]`` configures it."""
+    from ..descriptors import FPFHTransformer
+
+    params = dict(config.get("fpfh", {}))
+    descriptor = FPFHTransformer(**params, **({} if n_jobs is None else {"n_jobs": n_jobs}))
+    try:
+        descriptor._validate_params()
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"[fpfh]: {exc}") from None
+    return descriptor
+
+
+def _rpointhop_from(section: dict[str, Any], registering: bool) -> Any:
+    """The R-PointHop model ``section`` names (its ``model`` set), on its axes and
+    threads; the paper's model as registration matches it, on 128 axes, unless the
+    axes are given (``section`` is completed with them)."""
+    from ._common import load_model
+
+    name, n_jobs = section["model"], section["n_jobs"]
     if registering and name == "modelnet40" and section["n_components"] is None:
-        # The paper's model as registration matches it: on 128 axes.
         from ..registration.defaults import REGISTRATION_COMPONENTS
 
         section["n_components"] = REGISTRATION_COMPONENTS
-    if name is None and section["n_components"] is None and n_jobs is None:
-        return None, section
-    if name is None:
-        from ..registration.defaults import DEFAULT_MODEL
-
-        name = section["model"] = DEFAULT_MODEL
     try:
         descriptor = load_model(name, section["n_components"])
         if n_jobs is not None:
@@ -380,7 +418,7 @@ def descriptor_from(
         if isinstance(exc, ValueError) and not Path(str(name)).exists():
             raise
         raise UsageError(f"[descriptor]: {exc}") from None
-    return descriptor, section
+    return descriptor
 
 
 def estimator_section(estimator: Any) -> dict[str, Any]:

@@ -26,6 +26,7 @@ import open3d as o3d
 from ..descriptors import DescriptorUnion, FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
 from ..registration import ConsensusGlobal, RANSACGlobal, register
+from ..registration.defaults import SCENE_FPFH_WEIGHT
 from .peers import (
     fpfh_fgr,
     fpfh_ransac,
@@ -41,7 +42,6 @@ __all__ = [
     "DATASETS",
     "METHODS",
     "Method",
-    "SCENE_FPFH_WEIGHT",
     "default_methods",
     "check_methods",
     "claimed_by",
@@ -57,15 +57,9 @@ def shipped_scene_model():
     return RPointHopTransformer.pretrained("scene")
 
 
-#: FPFH's weight beside the scene model in :func:`scene_with_fpfh` (each part's rows at
-#: unit length), chosen on every official 3DMatch pair of the scene model's training
-#: scenes among 0.5, 0.7 and 1 (docs/registration.md).
-SCENE_FPFH_WEIGHT = 0.7
-
-
 def scene_with_fpfh() -> DescriptorUnion:
     """The shipped scene model and FPFH side by side, FPFH weighing
-    :data:`SCENE_FPFH_WEIGHT`."""
+    :data:`~o3d_rpointhop.registration.defaults.SCENE_FPFH_WEIGHT`."""
     return DescriptorUnion(
         [("rpointhop", shipped_scene_model()), ("fpfh", FPFHTransformer())],
         transformer_weights={"fpfh": SCENE_FPFH_WEIGHT},

@@ -12,6 +12,7 @@ __all__ = [
     "DEFAULT_GLOBAL_METHOD",
     "DEFAULT_GLOBAL_POINTS",
     "REGISTRATION_COMPONENTS",
+    "SCENE_FPFH_WEIGHT",
     "default_descriptor",
     "resolve_global_method",
     "resolve_global_points",
@@ -44,6 +45,12 @@ DEFAULT_GLOBAL_POINTS = 2048
 #: wins (FPFH on the training scenes of 3DMatch: 77.0 / 26.3 % against 83.6 / 43.9 %),
 #: so scene models state it and FPFH on scenes takes ``global_method="consensus"``.
 DEFAULT_GLOBAL_METHOD = "ransac"
+
+#: FPFH's weight beside R-PointHop in a :class:`~o3d_rpointhop.DescriptorUnion` (each
+#: part's rows at unit length): chosen for the shipped scene model on every official
+#: 3DMatch pair of its training scenes among 0.5, 0.7 and 1 (3DLoMatch 144, 148 and 145
+#: of 195 registered, 3DMatch 112 of 121 at 0.7, as without FPFH; docs/registration.md).
+SCENE_FPFH_WEIGHT = 0.7
 
 
 def default_descriptor() -> RPointHopTransformer:

@@ -121,6 +121,12 @@ def test_usage_errors_exit_2(capsys):
     "extra, message, status",
     [
         (["--descriptor", "fpfh", "--model", "m.npz"], "--model applies to the rpointhop", 1),
+        (["--set", "descriptor.fpfh_weight=0.5"], "fpfh_weight applies to the rpointhop+fpfh", 2),
+        (
+            ["--descriptor", "rpointhop+fpfh", "--set", "descriptor.fpfh_weight=0"],
+            "must be positive and finite",
+            2,
+        ),
         (["--init", "bad.txt"], "3 numbers, expected 4", 1),
         (["--model", "missing.npz"], "no such model file", 1),
         (["--refine", "none", "--symmetry-check"], "--symmetry-check needs an ICP", 2),

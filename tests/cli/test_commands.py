@@ -298,6 +298,7 @@ def test_register_options(tmp_path, capsys):
     src, tgt, truth = moved_pair_files(tmp_path)
     for extra in (
         ["--descriptor", "fpfh"],
+        ["--descriptor", "rpointhop+fpfh"],
         ["--global", "svd", "--refine", "none"],
         ["--global", "fgr", "--refine", "multiscale", "--voxel-size", "0.04"],
         ["--refine", "point_to_point", "--symmetry-check"],
@@ -316,6 +317,21 @@ def test_register_options(tmp_path, capsys):
     assert (
         np.abs(np.array(json.loads(capsys.readouterr().out)["transformation"]) - truth).max() < 1e-6
     )
+
+
+def test_register_with_rpointhop_and_fpfh_records_the_union(tmp_path, capsys):
+    src, tgt, truth = moved_pair_files(tmp_path)
+    args = ["register", src, tgt, "--descriptor", "rpointhop+fpfh", "--model", "scene"]
+    assert main([*args, "--set", "descriptor.fpfh_weight=1.5", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    record = summary["provenance"]
+    union = record["descriptor"]
+    assert union["class"] == "o3d_rpointhop.DescriptorUnion"
+    assert union["parts"]["rpointhop"]["model"] == "scene"
+    assert union["parts"]["fpfh"]["class"] == "o3d_rpointhop.FPFHTransformer"
+    assert union["transformer_weights"] == {"fpfh": 1.5}
+    assert record["config"]["descriptor"]["fpfh_weight"] == 1.5
+    assert np.abs(np.array(summary["transformation"]) - truth).max() < 0.02
 
 
 def test_demo_prints_a_human_summary_and_says_when_it_falls_back(tmp_path, capsys):
