@@ -3,6 +3,7 @@ width and the scikit-learn tags (in the manner of scikit-learn's ``_BasePCA``)."
 
 from __future__ import annotations
 
+import inspect
 from abc import ABCMeta, abstractmethod
 from typing import Any
 
@@ -12,7 +13,28 @@ from sklearn.base import BaseEstimator, ClassNamePrefixFeaturesOutMixin, Transfo
 from .._utils.parallel import map_clouds
 from .._utils.validation import as_cloud_list, as_viewpoints
 
-__all__ = ["BaseDescriptor"]
+__all__ = ["BaseDescriptor", "call_with_viewpoints"]
+
+
+def call_with_viewpoints(method: Any, X: Any, viewpoints: Any, *args: Any) -> Any:
+    """``method(X, *args)`` (a descriptor's ``transform`` or ``transform_turns``), with
+    ``viewpoints`` when given.
+
+    Raises
+    ------
+    TypeError
+        If viewpoints are given and ``method`` takes none (a transformer from outside
+        this library).
+    """
+    if viewpoints is None:
+        return method(X, *args)
+    if "viewpoints" not in inspect.signature(method).parameters:
+        owner = type(method.__self__).__name__
+        raise TypeError(
+            f"viewpoints were given, but {owner}.{method.__name__} takes none: use a "
+            "descriptor of this library, or leave viewpoints out"
+        )
+    return method(X, *args, viewpoints=viewpoints)
 
 
 class BaseDescriptor(

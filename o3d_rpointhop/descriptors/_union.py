@@ -3,7 +3,6 @@ manner of scikit-learn's ``FeatureUnion``)."""
 
 from __future__ import annotations
 
-import inspect
 from numbers import Real
 from typing import Any
 
@@ -13,6 +12,7 @@ from sklearn.preprocessing import normalize
 from sklearn.utils.validation import check_is_fitted
 
 from .._utils.validation import as_cloud_list
+from ._base import call_with_viewpoints as _call
 
 __all__ = ["DescriptorUnion", "unit_rows"]
 
@@ -33,24 +33,6 @@ def unit_rows(features: Any) -> np.ndarray:
     features = np.asarray(features)
     flat = features.reshape(-1, features.shape[-1])
     return normalize(flat, norm="l2", copy=True).reshape(features.shape)
-
-
-def _takes_viewpoints(method: Any) -> bool:
-    return "viewpoints" in inspect.signature(method).parameters
-
-
-def _call(method: Any, X: Any, viewpoints: Any, *args: Any) -> Any:
-    """``method(X, *args)``, with ``viewpoints`` when given (a method that takes none
-    refuses them clearly)."""
-    if viewpoints is None:
-        return method(X, *args)
-    if not _takes_viewpoints(method):
-        owner = type(method.__self__).__name__
-        raise TypeError(
-            f"viewpoints were given, but {owner}.{method.__name__} takes none: use a "
-            "descriptor of this library, or leave viewpoints out"
-        )
-    return method(X, *args, viewpoints=viewpoints)
 
 
 class DescriptorUnion(TransformerMixin, BaseEstimator):

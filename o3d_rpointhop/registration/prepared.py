@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from ..descriptors._base import call_with_viewpoints
+
 __all__ = [
     "NORMAL_NEIGHBOURS",
     "PreparedCloud",
@@ -100,8 +102,6 @@ def describe_global(
         If a viewpoint is given to a descriptor whose ``transform`` takes none, or turns
         to one without local frames.
     """
-    import inspect
-
     at = getattr(descriptor, "at_resolution", None)
     bound = descriptor if at is None else at(voxel, settings)
     if n_turns > 1:
@@ -111,15 +111,8 @@ def describe_global(
                 "frames to turn (no transform_turns): use RPointHopTransformer, or "
                 "frame_turns=1"
             )
-        return np.asarray(bound.transform_turns(cloud, n_turns, viewpoints=viewpoint))
-    if viewpoint is None:
-        return np.asarray(bound.transform(cloud))
-    if "viewpoints" not in inspect.signature(bound.transform).parameters:
-        raise TypeError(
-            f"viewpoints were given, but {type(bound).__name__}.transform takes none: "
-            "use a descriptor of this library, or leave viewpoints out"
-        )
-    return np.asarray(bound.transform(cloud, viewpoints=viewpoint))
+        return np.asarray(call_with_viewpoints(bound.transform_turns, cloud, viewpoint, n_turns))
+    return np.asarray(call_with_viewpoints(bound.transform, cloud, viewpoint))
 
 
 def prepare_cloud(
