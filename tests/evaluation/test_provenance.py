@@ -57,6 +57,12 @@ def test_every_method_names_its_descriptor(fitted):
     assert methods["fpfh-pipeline-consensus-icp"]["descriptor"]["class"].endswith("FPFHTransformer")
     assert methods["fpfh-ransac-icp"]["descriptor"]["class"].startswith("open3d.")
     assert methods["rpointhop-svd"]["options"] == {"global_method": "svd", "refine": None}
+    # A union names both parts and the weight, not the benchmark's model alone.
+    union = methods["rpointhop-scene-fpfh-turns"]["descriptor"]
+    assert union["class"] == "o3d_rpointhop.DescriptorUnion"
+    assert union["parts"]["rpointhop"]["sha256"] == content_hash(scene)
+    assert union["parts"]["fpfh"]["class"] == "o3d_rpointhop.FPFHTransformer"
+    assert union["transformer_weights"] == {"fpfh": 0.7}
 
 
 def _result(provenance):
