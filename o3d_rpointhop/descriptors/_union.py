@@ -43,7 +43,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
     alone: R-PointHop's learned, frame-based descriptor and FPFH's angle histograms
     disagree on which walls and table tops look alike. Scaling each part's rows to unit
     length makes the weights the parts' shares of a distance, whatever their own scales
-    (FPFH's histograms sum to 300, R-PointHop's rows are projections of centred data).
+    (an FPFH row sums to 600, R-PointHop's rows are projections of centred data).
     The union has the interface of its parts (``fit``, ``transform`` with
     ``viewpoints``, one row per input point in input order), so it is given to
     :func:`~o3d_rpointhop.register`, to a global step's ``descriptor`` or to a
