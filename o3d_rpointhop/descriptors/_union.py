@@ -71,7 +71,9 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
     Notes
     -----
     ``fit`` fits every part in place, as ``FeatureUnion`` does: give it a fitted
-    (pretrained) part and do not call ``fit`` to keep that part as it is.
+    (pretrained) part and do not call ``fit`` to keep that part as it is, or wrap the
+    part in ``sklearn.frozen.FrozenEstimator`` where something else fits and clones
+    (``RegistrationPipeline.fit``, ``GridSearchCV``).
     :meth:`transform` works as soon as every part can transform (FPFH learns nothing).
     With frame turns (:meth:`transform_turns`), the parts without local frames (no
     ``transform_turns``, as FPFH) are repeated under every turn.
@@ -134,7 +136,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         X : point cloud(s)
             As the parts' ``fit`` takes them.
         y : None
-            Ignored.
+            Passed on (descriptors ignore it).
         viewpoints : None, "origin" or positions, default=None
             Passed to every part's ``fit``.
 
@@ -144,9 +146,9 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         """
         for _, part, _ in self._parts():
             if viewpoints is None:
-                part.fit(X)
+                part.fit(X, y)
             else:
-                part.fit(X, viewpoints=viewpoints)
+                part.fit(X, y, viewpoints=viewpoints)
         self.n_features_in_ = 3
         self.n_features_out_ = self._width()
         return self

@@ -235,6 +235,19 @@ def test_clone_pickle_and_pipeline(union, cloud):
     np.testing.assert_allclose(scaled.mean(axis=0), 0, atol=1e-5)
 
 
+def test_a_frozen_part_survives_clone_and_fit(fitted, cloud, train_clouds):
+    """Where something else clones and fits (a RegistrationPipeline, GridSearchCV), a
+    pretrained part wrapped in FrozenEstimator stays as it is."""
+    from sklearn.frozen import FrozenEstimator
+
+    union = DescriptorUnion([("rph", FrozenEstimator(fitted)), ("fpfh", FPFHTransformer())])
+    expected = union.transform(cloud)
+    refitted = clone(union).fit(train_clouds)
+    np.testing.assert_array_equal(refitted.transform(cloud), expected)
+    assert refitted.n_features_out_ == fitted.n_features_out_ + 33
+    np.testing.assert_array_equal(refitted.transform_turns(cloud, 2)[0], expected)
+
+
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")
 def test_sklearn_check_estimator():
     estimator = DescriptorUnion(
