@@ -358,10 +358,6 @@ def descriptor_from(
         from ..descriptors import DescriptorUnion
         from ..registration.defaults import SCENE_FPFH_WEIGHT
 
-        if section["model"] is None:
-            from ..registration.defaults import DEFAULT_MODEL
-
-            section["model"] = DEFAULT_MODEL if registering else "modelnet40"
         if section["fpfh_weight"] is None:
             section["fpfh_weight"] = SCENE_FPFH_WEIGHT
         fpfh = _fpfh_from(config, section["n_jobs"])
@@ -374,14 +370,9 @@ def descriptor_from(
         except ValueError as exc:
             raise UsageError(f"[descriptor]: {exc}") from None
         return union, {**section, "fpfh": estimator_section(fpfh)}
-    if not registering and section["model"] is None:
-        section["model"] = "modelnet40"
-    if section["model"] is None and section["n_components"] is None and section["n_jobs"] is None:
+    unset = (section["model"], section["n_components"], section["n_jobs"]) == (None,) * 3
+    if registering and unset:
         return None, section
-    if section["model"] is None:
-        from ..registration.defaults import DEFAULT_MODEL
-
-        section["model"] = DEFAULT_MODEL
     return _rpointhop_from(section, registering), section
 
 
@@ -399,11 +390,15 @@ def _fpfh_from(config: dict[str, dict], n_jobs: int | None) -> Any:
 
 
 def _rpointhop_from(section: dict[str, Any], registering: bool) -> Any:
-    """The R-PointHop model ``section`` names (its ``model`` set), on its axes and
-    threads; the paper's model as registration matches it, on 128 axes, unless the
-    axes are given (``section`` is completed with them)."""
+    """The R-PointHop model ``section`` names, on its axes and threads (``section`` is
+    completed with what was left to the defaults): no model named is the library's
+    default model when registering, the paper's model otherwise; the paper's model as
+    registration matches it is on 128 axes unless the axes are given."""
+    from ..registration.defaults import DEFAULT_MODEL
     from ._common import load_model
 
+    if section["model"] is None:
+        section["model"] = DEFAULT_MODEL if registering else "modelnet40"
     name, n_jobs = section["model"], section["n_jobs"]
     if registering and name == "modelnet40" and section["n_components"] is None:
         from ..registration.defaults import REGISTRATION_COMPONENTS

@@ -11,7 +11,6 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.preprocessing import normalize
 from sklearn.utils.validation import check_is_fitted
 
-from .._utils.validation import as_cloud_list
 from ._base import call_with_viewpoints as _call
 
 __all__ = ["DescriptorUnion", "unit_rows"]
@@ -226,13 +225,12 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
                 "to turn (no transform_turns): add an RPointHopTransformer, or use "
                 "frame_turns=1"
             )
-        turn_axis = 1 if as_cloud_list(X)[1] == "batch" else 0
         answers = []
         for _, part, weight in parts:
             if hasattr(part, "transform_turns"):
                 answer = _call(part.transform_turns, X, viewpoints, n_turns)
             else:
-                answer = _repeated(_call(part.transform, X, viewpoints), n_turns, turn_axis)
+                answer = _repeated(_call(part.transform, X, viewpoints), n_turns)
             answers.append((answer, weight))
         return self._joined(answers)
 
@@ -312,12 +310,14 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         return tags
 
 
-def _repeated(answer: Any, n_turns: int, axis: int) -> Any:
-    """A part's descriptors without turns, repeated under ``n_turns`` turns along
-    ``axis`` (each cloud's first; the second of a stack of clouds)."""
+def _repeated(answer: Any, n_turns: int) -> Any:
+    """A part's descriptors without turns, repeated under ``n_turns`` turns: a new axis
+    before each cloud's rows (the first of one cloud's, the second of a stack's)."""
     if isinstance(answer, list):
-        return [_repeated(a, n_turns, 0) for a in answer]
-    answer = np.expand_dims(np.asarray(answer), axis)
+        return [_repeated(a, n_turns) for a in answer]
+    answer = np.asarray(answer)
+    axis = answer.ndim - 2
+    answer = np.expand_dims(answer, axis)
     shape = list(answer.shape)
     shape[axis] = n_turns
     return np.broadcast_to(answer, shape)
@@ -335,4 +335,4 @@ def _join(blocks: list[tuple[Any, float]]) -> np.ndarray:
         weight * unit_rows(a.astype(np.float32, copy=False))
         for a, (_, weight) in zip(arrays, blocks, strict=True)
     ]
-    return np.concatenate(scaled, axis=-1).astype(np.float32, copy=False)
+    return np.concatenate(scaled, axis=-1)
