@@ -110,6 +110,17 @@ def test_multiway_results_and_pose_graphs_round_trip(tmp_path, multiway):
     )
     with pytest.raises(ValueError, match="not a saved RegistrationResult"):
         RegistrationResult.load(tmp_path / "r.json")
+    # A damaged file is refused by name: a pose that is not a 4 x 4 matrix, a part left out.
+    body = json.loads((tmp_path / "r.json").read_text())
+    body["poses"][0] = [[1.0, 0.0], [0.0, 1.0]]
+    (tmp_path / "pose.json").write_text(json.dumps(body))
+    with pytest.raises(ValueError, match=r"pose.json: expected a finite \(4, 4\) array"):
+        MultiwayResult.load(tmp_path / "pose.json")
+    body = json.loads((tmp_path / "r.json").read_text())
+    del body["edges"]
+    (tmp_path / "cut.json").write_text(json.dumps(body))
+    with pytest.raises(ValueError, match="cut.json: a damaged saved result"):
+        MultiwayResult.load(tmp_path / "cut.json")
 
 
 def test_registration_results_round_trip(tmp_path):

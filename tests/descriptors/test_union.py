@@ -225,6 +225,48 @@ def test_fit_fits_every_part_and_names_the_outputs(train_clouds, cloud):
     )
 
 
+class _Recorder:
+    """A part that records what ``fit`` was given and answers ``rows`` rows per cloud."""
+
+    def __init__(self, width=2, rows=None):
+        self.width, self.rows = width, rows
+
+    def fit(self, X, y=None, viewpoints=None):
+        self.seen_ = (len(X), y, viewpoints)
+        self.n_features_out_ = self.width
+        return self
+
+    def transform(self, X):
+        return np.ones((len(X) if self.rows is None else self.rows, self.width))
+
+
+def test_fit_passes_viewpoints_and_y_to_every_part(train_clouds):
+    a, b = _Recorder(), _Recorder(3)
+    union = DescriptorUnion([("a", a), ("b", b)]).fit(train_clouds, "y", viewpoints="origin")
+    assert a.seen_ == b.seen_ == (len(train_clouds), "y", "origin")
+    assert union.n_features_out_ == 5
+    union.fit(train_clouds)
+    assert a.seen_[2] is None  # no viewpoints: none passed on
+
+
+def test_parts_that_disagree_or_do_not_say_their_width_are_named(cloud, train_clouds):
+    union = DescriptorUnion([("a", _Recorder()), ("b", _Recorder(rows=7))])
+    with pytest.raises(ValueError, match="different numbers of rows"):
+        union.transform(cloud)
+    with pytest.raises(ValueError, match="different numbers of rows"):
+        union.transform([cloud, cloud])
+
+    class Silent:
+        def fit(self, X, y=None):
+            return self
+
+        def transform(self, X):
+            return np.ones((len(X), 2))
+
+    with pytest.raises(AttributeError, match="part 'quiet' does not say its width"):
+        DescriptorUnion([("a", _Recorder()), ("quiet", Silent())]).fit(train_clouds)
+
+
 def test_clone_pickle_and_pipeline(union, cloud):
     copy = clone(union)
     assert copy.get_params(deep=False).keys() == union.get_params(deep=False).keys()

@@ -55,6 +55,10 @@ def test_prepared_clouds_and_features_register_like_computed_ones(pretrained32):
     assert result.voxel_size == plain.voxel_size
     with pytest.raises(ValueError, match="one row per point"):
         PreparedCloud(prepared[0].points, prepared[0].features[:5])
+    with pytest.raises(ValueError, match=r"prepared points must be \(n, 3\), got \(5, 2\)"):
+        PreparedCloud(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match=r"normals must be one per point: \(4, 3\) for 5"):
+        PreparedCloud(np.zeros((5, 3)), normals=np.zeros((4, 3)))
     with pytest.raises(TypeError, match="PreparedCloud"):
         RegistrationContext(source, target, prepared=(prepared[0].points, prepared[1]))
 

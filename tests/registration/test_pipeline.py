@@ -118,6 +118,10 @@ def test_pipeline_params_clone_and_validation(object_model):
         pipe.set_params(nope__x=1)
     with pytest.raises(ValueError, match="RegistrationStep"):
         RegistrationPipeline([("a", "ransac")]).register(np.eye(3), np.eye(3))
+    with pytest.raises(ValueError, match="non-empty list of"):
+        RegistrationPipeline([]).register(np.eye(3), np.eye(3))
+    with pytest.raises(ValueError, match=r"each step must be a \(name, step\) pair"):
+        RegistrationPipeline([("a", SVDGlobal(), 3)]).register(np.eye(3), np.eye(3))
     with pytest.raises(ValueError, match="unique"):
         RegistrationPipeline([("a", SVDGlobal()), ("a", SVDGlobal())]).register(
             np.eye(3), np.eye(3)

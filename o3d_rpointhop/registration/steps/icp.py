@@ -53,11 +53,19 @@ _SCHEDULE = [None, _POSITIVE, "array-like"]
 COVERAGE_DROP = 0.1
 
 
+#: The L1 kernel's weights ``1 / |r|`` are capped at ``1 / (L1_CAP * distance)``.
+L1_CAP = 1e-6
+
+
 def _robust_kernel(kernel: str | None, scale: float | None, distance: float):
     if kernel is None:
         return None
     if kernel == "l1":
-        return reg.L1Loss()
+        # Open3D's L1Loss weighs a residual by 1 / |r| and returns NaN as soon as one
+        # residual is exactly zero (clouds that share points, a cloud registered to
+        # itself). Huber's weights are k / max(|r|, k): the same weights up to a common
+        # factor, which a weighted fit ignores, capped where |r| < k.
+        return reg.HuberLoss(L1_CAP * float(distance))
     return _KERNELS[kernel](float(distance / 2.0 if scale is None else scale))
 
 
@@ -222,9 +230,12 @@ class PointToPlaneICP(_ICPStep):
     max_iteration : int, default=50
         Per pass.
     kernel : {{None, "huber", "tukey", "cauchy", "gm", "l1"}}, default=None
-        Robust loss on the point-to-plane residuals.
+        Robust loss on the point-to-plane residuals. ``"l1"`` weighs each residual by
+        ``1 / |r|``, capped for residuals under a millionth of the pass's distance (so
+        points the two clouds share exactly do not divide by zero).
     kernel_scale : float, default=None
-        The loss's scale; ``None`` is half the pass's correspondence distance.
+        The loss's scale (not ``"l1"``'s); ``None`` is half the pass's correspondence
+        distance.
     relative_fitness, relative_rmse : float, default=1e-6
     {full}
     """

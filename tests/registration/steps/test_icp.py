@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import assert_close_pose, moved_copy, random_motion
+from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import (
     GeneralizedICP,
@@ -13,6 +14,7 @@ from o3d_rpointhop import (
     PointToPointICP,
     register,
 )
+from o3d_rpointhop.datasets.synthetic import make_object
 from o3d_rpointhop.transforms import rotation_error_deg
 
 
@@ -78,6 +80,14 @@ def test_point_to_point_has_no_kernel_and_bad_kernels_are_named(object_target):
         register(
             object_target, object_target, global_method=None, refine=PointToPlaneICP(kernel="fancy")
         )
+    bad_steps = [
+        (PointToPlaneICP(max_correspondence_distance=[]), "non-empty sequence of positive"),
+        (PointToPlaneICP(max_correspondence_distance=[0.1, -1]), "got \\[0.1, -1\\]"),
+        (MultiScaleICP(scales=(2, 1), max_iteration=(10,)), "non-empty and as long"),
+    ]
+    for step, message in bad_steps:
+        with pytest.raises(ValueError, match=message):
+            register(object_target, object_target, global_method=None, refine=step)
 
 
 # ----------------------------------------------------------------------------- coverage guard
@@ -150,3 +160,19 @@ def test_full_resolution_false_keeps_every_pass_on_the_global_clouds(
     assert_close_pose(kept.transformation, truth, 0.05, 1e-3)
     with pytest.raises(ValueError, match="'full_resolution' parameter"):
         register(source, dense, global_method=None, refine=step_class(full_resolution="no"))
+
+
+@pytest.mark.parametrize("step", [PointToPlaneICP, GeneralizedICP, MultiScaleICP])
+def test_the_l1_kernel_registers_clouds_that_share_points(step):
+    # Two crops of one cloud: at the truth some residuals are exactly zero, where
+    # Open3D's L1Loss weighs by 1 / 0 and answers NaN.
+    cloud = make_object(2000, shape_seed=1)
+    source, target = cloud[:1500], cloud[500:]
+    aligned = register(source, target, global_method=None, refine=step(kernel="l1"))
+    np.testing.assert_allclose(aligned.transformation, np.eye(4), atol=1e-6)
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_rotvec(np.radians(4.0) * np.array([0.0, 0.6, 0.8])).as_matrix()
+    truth[:3, 3] = [0.01, -0.02, 0.015]
+    moved = (source - truth[:3, 3]) @ truth[:3, :3]  # truth carries it back onto target
+    result = register(moved, target, global_method=None, refine=step(kernel="l1"))
+    assert_close_pose(result.transformation, truth, 0.05, 1e-3)
