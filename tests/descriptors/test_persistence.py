@@ -92,6 +92,101 @@ def test_load_rejects_newer_format_and_inconsistent_arrays(fitted, tmp_path):
         RPointHopTransformer.load(pickled)
 
 
+def _metadata(path):
+    import json
+
+    with np.load(path, allow_pickle=False) as archive:
+        return json.loads(str(archive["metadata"]))
+
+
+def _meta_change(**changes):
+    def change(meta, arrays):
+        meta.update(changes)
+
+    return change
+
+
+def _array_change(key, edit):
+    def change(meta, arrays):
+        arrays[key] = edit(arrays[key].copy())
+
+    return change
+
+
+def _with_axes(edit):
+    def change(meta, arrays):
+        width = meta["n_features_out"]
+        arrays.update(
+            pca_components=np.eye(2, width),
+            pca_variance=np.ones(2),
+            pca_mean=np.zeros(width),
+        )
+        edit(arrays)
+
+    return change
+
+
+def _shuffle(selected):
+    return selected[::-1]
+
+
+def _nan_mean(arrays):
+    arrays["pca_mean"] = np.full_like(arrays["pca_mean"], np.nan)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (_meta_change(format="another"), "metadata does not name this format"),
+        (_meta_change(format_version=0), "bad format_version 0"),
+        (
+            _meta_change(params={"n_neighbors": [64], "colour": 1}),
+            r"unknown parameters \['colour'\]",
+        ),
+        (_meta_change(n_hops=3), "n_hops=3 does not match n_neighbors"),
+        (_meta_change(n_features_out=7), "n_features_out does not match the last hop"),
+        (_meta_change(training_scenes="kitchen"), "training_scenes is not a list of names"),
+        (_array_change("hop0_selected", lambda s: s.astype(np.float64)), "no valid channel"),
+        (_array_change("hop0_selected", _shuffle), "selects channels out of range"),
+        (_array_change("hop1_selected", lambda s: s + 10_000), "selects channels out of range"),
+        (_with_axes(lambda a: a.update(pca_variance=np.ones(3))), "axes do not match"),
+        (_with_axes(_nan_mean), "principal axes hold non-finite values"),
+    ],
+    ids=[
+        "format",
+        "version",
+        "parameter",
+        "hops",
+        "width",
+        "scenes",
+        "selection-dtype",
+        "selection-order",
+        "selection-range",
+        "axes-shape",
+        "axes-nan",
+    ],
+)
+def test_each_inconsistency_of_a_model_file_is_named(fitted, tmp_path, change, message):
+    import json
+
+    good = tmp_path / "good.npz"
+    fitted.save(good)
+    meta = _metadata(good)
+    with np.load(good, allow_pickle=False) as archive:
+        arrays = {k: archive[k] for k in archive.files}
+    change(meta, arrays)
+    arrays["metadata"] = np.array(json.dumps(meta))
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(ValueError, match=f"not a valid o3d-rpointhop-model file.*{message}"):
+        RPointHopTransformer.load(tmp_path / "bad.npz")
+
+
+def test_an_archive_of_one_array_is_refused(tmp_path):
+    np.save(tmp_path / "one.npy", np.arange(3))
+    with pytest.raises(ValueError, match="single array, not an .npz archive"):
+        RPointHopTransformer.load(tmp_path / "one.npy")
+
+
 def test_save_needs_a_fitted_model(tmp_path):
     from sklearn.exceptions import NotFittedError
 

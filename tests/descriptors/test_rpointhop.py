@@ -149,6 +149,10 @@ def test_duplicated_points_get_equal_descriptors(fitted):
         (np.zeros((200, 3)), "no spatial extent"),
         (np.full((200, 3), "a"), "real numbers"),
         (make_blob(200) + 0j, "Complex data not supported"),
+        (np.array([["a", "b", "c"]] * 200, dtype=object), "must hold real numbers: could not"),
+        ([[0.0, 0.0, 0.0], [1.0, 2.0]], "could not be read as an array of points"),
+        (np.zeros((0, 200, 3)), "empty batch of point clouds"),
+        (make_blob(200) * 1e200, "beyond 1e.150 squared distances overflow; rescale"),
     ],
 )
 def test_bad_input_raises_a_clear_error(fitted, bad, message):
@@ -161,6 +165,15 @@ def test_bad_cloud_in_a_list_is_named(fitted):
         fitted.transform([make_blob(200), make_blob(50)])
     with pytest.raises(ValueError, match=r"X\[1\].*NaN"):
         RPointHopTransformer().fit([make_blob(200), np.full((200, 3), np.nan)])
+
+
+def test_bad_viewpoints_and_tensor_clouds_without_points_are_named(fitted):
+    import open3d as o3d
+
+    with pytest.raises(ValueError, match="viewpoints must be None, 'origin' or positions"):
+        fitted.transform(make_blob(200), viewpoints=[[1.0, "x"]])
+    with pytest.raises(ValueError, match="tensor PointCloud has no 'positions'"):
+        fitted.transform(o3d.t.geometry.PointCloud())
 
 
 def test_sparse_input_is_refused(fitted):
