@@ -8,7 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
-from helpers import free_port, random_motion
+from helpers import free_port, partial_views, random_motion
 
 from o3d_rpointhop import register, register_multiway
 from o3d_rpointhop.datasets import make_object
@@ -124,7 +124,7 @@ def test_missing_viewer_names_the_install_line(monkeypatch):
         viewer.show_registration(np.zeros((10, 3)), np.zeros((10, 3)), np.eye(4))
 
 
-def test_the_view_command_serves_saved_results_and_transforms(tmp_path, monkeypatch):
+def test_the_view_command_serves_saved_results_and_transforms(tmp_path, monkeypatch, capsys):
     from o3d_rpointhop import viewer
     from o3d_rpointhop.cli import main
     from o3d_rpointhop.poses import write_matrix
@@ -144,3 +144,25 @@ def test_the_view_command_serves_saved_results_and_transforms(tmp_path, monkeypa
     assert main(["view", str(tmp_path / "T.txt"), *files]) == 0
     assert served[2].converged and served[2].steps[0].name == "evaluate"
     assert main(["view", str(tmp_path / "r.json"), files[0]]) == 1  # a pair needs two
+    assert main(["view", str(tmp_path / "missing.json"), *files]) == 1
+    (tmp_path / "garbage.json").write_text("{not json")
+    assert main(["view", str(tmp_path / "garbage.json"), *files]) == 1
+    assert "garbage.json, line 1: not numbers" in capsys.readouterr().err
+    # A saved multiway result is shown with every scan, named by its file.
+    from o3d_rpointhop.registration import MultiwayResult
+
+    scans, _ = partial_views(3, seed=1)
+    names = []
+    for k, scan in enumerate(scans):
+        np.save(tmp_path / f"scan{k}.npy", scan)
+        names.append(str(tmp_path / f"scan{k}.npy"))
+    register_multiway(scans, seed=0).save(tmp_path / "m.json")
+    captured = {}
+    monkeypatch.setattr(viewer, "show_multiway", lambda s, r, **kw: captured.update(r=r, s=s, **kw))
+    assert main(["view", str(tmp_path / "m.json"), *names, "--port", "8123"]) == 0
+    assert isinstance(captured["r"], MultiwayResult) and len(captured["s"]) == 3
+    assert captured["names"] == ["scan0.npy", "scan1.npy", "scan2.npy"]
+    assert captured["port"] == 8123 and captured["host"] == "127.0.0.1"
+    saved = MultiwayResult.load(tmp_path / "m.json")
+    for a, b in zip(captured["r"].poses, saved.poses, strict=True):
+        np.testing.assert_array_equal(a, b)
