@@ -381,12 +381,15 @@ def build_geometry(
     search = HopSearch(points)
     method = resolve_method(config.sampling, n)
     found = graph = None
-    if method == "fps":  # the search first: FPS runs on its neighbour lists
+    if method == "fps" or n <= GEOMETRY_CHUNK:
+        # The search first: the samples are drawn from its neighbour lists (FPS's
+        # updates, the Poisson disks' first competitors). Larger clouds are searched
+        # chunk by chunk in the frames' pass, which holds one chunk's lists at a time.
         neighbours, reach, mean_dist = search.neighbours(
             None, k_search, levels, n_mean=config.lrf_neighbors - 1, n_threads=n_threads
         )
         found, graph = (neighbours, mean_dist), (neighbours, reach)
-    drawn = hop_subsets(points, sizes if for_fit else sizes[:-1], method, graph)
+    drawn = hop_subsets(points, sizes if for_fit else sizes[:-1], method, graph, n_threads)
     samples = [_whole(s, n) for s in drawn]
     sources = [None] + samples[: n_hops - 1]
     queries = samples if for_fit else samples + [None]

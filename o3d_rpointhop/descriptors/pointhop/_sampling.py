@@ -32,6 +32,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..._utils.compiled import kernel
+from ..._utils.kdtree import pair_less
+from ..._utils.threads import run_blocks
 from ._neighbors import HopSearch
 
 __all__ = [
@@ -243,7 +245,9 @@ def priorities(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.modf(_GOLDEN * radial)[0]
 
 
-def poisson_disk_subset(points: np.ndarray, m: int) -> np.ndarray:
+def poisson_disk_subset(
+    points: np.ndarray, m: int, lists: np.ndarray | None = None, n_threads: int = 1
+) -> np.ndarray:
     """Sorted indices of an ``m``-point Poisson-disk subsample of ``points``.
 
     Parameters
@@ -251,6 +255,12 @@ def poisson_disk_subset(points: np.ndarray, m: int) -> np.ndarray:
     points : ndarray of shape (n, 3)
     m : int
         Between 1 and ``n``. Shares below about ``1 / 9`` of ``n`` take several rounds.
+    lists : ndarray of shape (n, k), default=None
+        Every point's ``k`` nearest others, in any order (the hops' search of the whole
+        cloud), ``k`` at least the competitors: the first round takes each point's
+        competitors from them instead of searching again (the same competitors).
+    n_threads : int, default=1
+        Threads of the searches (the sample does not depend on it).
 
     Returns
     -------
@@ -263,21 +273,60 @@ def poisson_disk_subset(points: np.ndarray, m: int) -> np.ndarray:
     while len(current) > m:
         # Each round keeps at least the local maxima, ~1/(k+1); several rounds for tiny m.
         step = max(m, int(np.ceil(len(current) / (_COMPETITORS + 1))))
-        current = current[_thin(points[current], step)]
+        first = lists if len(current) == n else None
+        current = current[_thin(points[current], step, first, n_threads)]
     return current
 
 
-def _thin(points: np.ndarray, m: int) -> np.ndarray:
-    """One hard-core thinning of ``points`` down to (at most) ``m`` of them."""
+@kernel(nogil=True)
+def _nearest_of_lists(start, stop, points, lists, out_index, out_sq):  # pragma: no cover - compiled
+    """For the rows ``start:stop``, the ``k`` nearest of each row's candidates
+    ``lists[i]`` (by squared distance, then index, as the searches rank them; ``k`` the
+    width of ``out_index``), with their squared distances, nearest first."""
+    k = out_index.shape[1]
+    for i in range(start, stop):
+        size = 0
+        for e in range(lists.shape[1]):
+            j = lists[i, e]
+            o0 = points[j, 0] - points[i, 0]
+            o1 = points[j, 1] - points[i, 1]
+            o2 = points[j, 2] - points[i, 2]
+            d = (o0 * o0 + o1 * o1) + o2 * o2
+            if size == k and not pair_less(d, j, out_sq[i, k - 1], out_index[i, k - 1]):
+                continue
+            r = size if size < k else k - 1
+            while r > 0 and pair_less(d, j, out_sq[i, r - 1], out_index[i, r - 1]):
+                out_sq[i, r] = out_sq[i, r - 1]
+                out_index[i, r] = out_index[i, r - 1]
+                r -= 1
+            out_sq[i, r] = d
+            out_index[i, r] = j
+            if size < k:
+                size += 1
+
+
+def _thin(
+    points: np.ndarray, m: int, lists: np.ndarray | None = None, n_threads: int = 1
+) -> np.ndarray:
+    """One hard-core thinning of ``points`` down to (at most) ``m`` of them; each point's
+    competitors are its ``k`` nearest, taken from ``lists`` (see
+    :func:`poisson_disk_subset`) or searched."""
     n = len(points)
     if m >= n:
         return np.arange(n, dtype=np.int64)
     k = min(_COMPETITORS, n - 1)
     if k < 1:
         return np.arange(m, dtype=np.int64)
-    idx = HopSearch(points).neighbours(None, k)[0]  # the point itself left out
-    offsets = points[idx] - points[:, None, :]
-    sq = (offsets[..., 0] ** 2 + offsets[..., 1] ** 2) + offsets[..., 2] ** 2
+    if lists is not None and lists.shape[1] >= k:
+        idx = np.empty((n, k), np.int64)
+        sq = np.empty((n, k))
+        run_blocks(_nearest_of_lists, n, n_threads, points, lists, idx, sq)
+    else:
+        # The point itself left out.
+        idx = HopSearch(points).neighbours(None, k, n_threads=n_threads)[0]
+        offsets = points[idx] - points[:, None, :]
+        sq = (offsets[..., 0] ** 2 + offsets[..., 1] ** 2) + offsets[..., 2] ** 2
+    # Only minima of the competitors are taken: their order does not matter.
     nearest = sq.min(axis=1)
     positive = nearest[nearest > 0]
     spacing = float(np.sqrt(np.median(positive))) if positive.size else 1.0
@@ -298,12 +347,16 @@ def resolve_method(method: str, n_points: int) -> str:
     return method
 
 
-def hop_subsets(points: np.ndarray, sizes: list[int], method: str, graph=None) -> list[np.ndarray]:
+def hop_subsets(
+    points: np.ndarray, sizes: list[int], method: str, graph=None, n_threads: int = 1
+) -> list[np.ndarray]:
     """Nested samples of ``points``, one per size (non-increasing), by ``method``.
 
     ``"fps"``: exact farthest point sampling from :func:`invariant_start`;
     ``"poisson"``: :func:`poisson_disk_subset`; ``"auto"``: FPS for clouds of at most
-    :data:`FPS_MAX_POINTS` points, Poisson disks above.
+    :data:`FPS_MAX_POINTS` points, Poisson disks above. ``graph``: the cloud's k-nearest
+    lists and their reach (:meth:`HopSearch.neighbours`), which both methods use;
+    ``n_threads``: the Poisson disks' searches.
     """
     method = resolve_method(method, len(points))
     if method == "fps":
@@ -314,6 +367,7 @@ def hop_subsets(points: np.ndarray, sizes: list[int], method: str, graph=None) -
         if not 1 <= m <= len(current):
             raise ValueError(f"cannot sample {m} of {len(current)} points")
         if m < len(current):
-            current = current[poisson_disk_subset(points[current], m)]
+            lists = graph[0] if graph is not None and len(current) == len(points) else None
+            current = current[poisson_disk_subset(points[current], m, lists, n_threads)]
         out.append(current)
     return out

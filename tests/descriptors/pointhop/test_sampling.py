@@ -49,6 +49,32 @@ def test_poisson_disk_moves_with_the_cloud(seed, share):
     np.testing.assert_array_equal(np.sort(perm[poisson_disk_subset(points[perm], m)]), base)
 
 
+@pytest.mark.parametrize("kind", ["object", "duplicates", "lattice"])
+def test_poisson_disk_on_the_neighbour_lists_draws_what_its_own_search_draws(kind):
+    """The first round's competitors taken from the hops' wider lists (in their own
+    order) are the same as searched, ties and coincident points included; on any
+    number of threads."""
+    pts = make_object(3000, shape_seed=4, sample_seed=1)
+    if kind == "duplicates":  # coincident points
+        pts = np.round(np.concatenate([pts, pts[:400]]), 2)
+    elif kind == "lattice":  # twelve neighbours tie at the eighth: the lower rows go first
+        pts = np.stack(np.meshgrid(*[np.arange(a, dtype=float) for a in (20, 20, 8)]), -1)
+        pts = pts.reshape(-1, 3)
+    pts = np.ascontiguousarray(pts[spatial_order(pts)])
+    lists = HopSearch(pts).neighbours(None, 40, (32, 20))[0]
+    for m in (2000, 900, 100):  # one round, one round at the limit, several rounds
+        searched = poisson_disk_subset(pts, m)
+        for n_threads in (1, 3):
+            np.testing.assert_array_equal(poisson_disk_subset(pts, m, lists, n_threads), searched)
+    sizes = [2500, 1500, 600]
+    for a, b in zip(
+        hop_subsets(pts, sizes, "poisson", (lists, None), 2),
+        hop_subsets(pts, sizes, "poisson"),
+        strict=True,
+    ):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_poisson_disk_spreads_the_sample():
     points = make_blob(4000, shape_seed=2)
     kept = points[poisson_disk_subset(points, 1000)]
