@@ -57,6 +57,36 @@ def test_benchmark_command_writes_json_markdown_and_plots(shared_data, tmp_path,
         assert [r["rotation_error_deg"] for r in first] == [r["rotation_error_deg"] for r in second]
 
 
+@pytest.mark.slow
+@pytest.mark.realdata
+def test_benchmark_3dmatch_command_records_every_method_on_the_same_pairs(
+    shared_data, tmp_path, capsys
+):
+    from o3d_rpointhop.cli import main
+
+    methods = ["rpointhop-scene", "fpfh-pipeline-consensus-icp"]
+    args = ["benchmark", "3dmatch", "--data", str(shared_data), "--scenes", "redkitchen"]
+    args += ["--max-pairs", "1", "--methods", ",".join(methods), "--output", str(tmp_path)]
+    assert main([*args, "--no-progress"]) == 0
+    assert "written:" in capsys.readouterr().out
+    results = json.loads((tmp_path / "3dmatch.json").read_text())
+    assert set(results["protocols"]) == {"3DMatch", "3DLoMatch"}
+    for benchmark in results["protocols"].values():
+        assert set(benchmark["summary"]) == set(methods)
+        pairs = [[r["pair"] for r in benchmark["records"][m]] for m in methods]
+        assert len(pairs[0]) == 1 and pairs[0] == pairs[1]  # the same pair for both
+        record = benchmark["records"]["rpointhop-scene"][0]
+        assert 0.0 <= record["diagnostics"]["support"] <= 1.0
+        assert "seconds" not in json.dumps(benchmark["records"])  # times are kept apart
+    scene = results["provenance"]["methods"]["rpointhop-scene"]["descriptor"]
+    assert scene["model"] == "scene" and scene["n_features_out"] == 96
+    timings = json.loads((tmp_path / "3dmatch_timings.json").read_text())["protocols"]
+    for name, benchmark in timings.items():
+        for method in methods:
+            assert benchmark["records"][method][0]["seconds"] > 0, (name, method)
+    assert (tmp_path / "3dmatch_registration_recall.png").stat().st_size > 1000
+
+
 def test_benchmark_command_rejects_bad_choices(capsys):
     from o3d_rpointhop.cli import main
 
