@@ -165,6 +165,24 @@ def pair_less(da, ia, db, ib):  # pragma: no cover - compiled
     return da < db or (da == db and ia < ib)
 
 
+@kernel(inline="always")
+def insert_ranked(values, rows, kept, v, index):  # pragma: no cover - compiled
+    """Put ``(v, index)`` into the list ``values[:kept]`` / ``rows[:kept]``, ascending by
+    value, then index (:func:`pair_less`), at most ``len(values)`` long (the last one
+    dropped when it is full); the caller checked that it belongs there. Returns the
+    list's new length. Candidates offered in increasing index go after the equal values
+    already kept."""
+    n = values.shape[0]
+    r = kept if kept < n else n - 1
+    while r > 0 and pair_less(v, index, values[r - 1], rows[r - 1]):
+        values[r] = values[r - 1]
+        rows[r] = rows[r - 1]
+        r -= 1
+    values[r] = v
+    rows[r] = index
+    return kept + 1 if kept < n else kept
+
+
 @kernel()
 def select_pairs(dist, index, lo, hi, kth):  # pragma: no cover - compiled
     """Reorder ``dist[lo:hi]`` and ``index[lo:hi]`` together so that position ``kth``

@@ -10,6 +10,7 @@ import numpy as np
 import open3d as o3d
 
 from .._utils.compiled import kernel
+from .._utils.kdtree import insert_ranked
 from .._utils.params import Interval, validate_params
 from ..descriptors._union import unit_rows
 
@@ -276,25 +277,8 @@ def _smallest_rows(values, n):  # pragma: no cover - compiled
         for j in range(m):
             v = values[i, j]
             if kept < n or v < best[n - 1]:
-                kept = _keep_smallest(best, out[i], kept, v, j)
+                kept = insert_ranked(best, out[i], kept, v, j)
     return out
-
-
-@kernel(inline="always")
-def _keep_smallest(values, rows, kept, v, index):  # pragma: no cover - compiled
-    """Put ``v`` (of row or column ``index``) into the ascending list ``values[:kept]``
-    / ``rows[:kept]`` of at most ``len(values)``, after every value it does not beat
-    (the last one dropped when the list is full); the caller checked that it belongs
-    there. Returns the list's new length."""
-    n = values.shape[0]
-    r = kept if kept < n else n - 1
-    while r > 0 and v < values[r - 1]:
-        values[r] = values[r - 1]
-        rows[r] = rows[r - 1]
-        r -= 1
-    values[r] = v
-    rows[r] = index
-    return kept + 1 if kept < n else kept
 
 
 @kernel()
@@ -321,11 +305,11 @@ def _candidates_both_ways(
                 w = g + own
                 c = col_kept[j]
                 if c < n_col or w < col_values[j, n_col - 1]:
-                    col_kept[j] = _keep_smallest(col_values[j], col_rows[j], c, w, first + i)
+                    col_kept[j] = insert_ranked(col_values[j], col_rows[j], c, w, first + i)
             if n_row:
                 v = g + ref_sq[j]
                 if kept < n_row or v < best[n_row - 1]:
-                    kept = _keep_smallest(best, out[i], kept, v, j)
+                    kept = insert_ranked(best, out[i], kept, v, j)
     return out
 
 

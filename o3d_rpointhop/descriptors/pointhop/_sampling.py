@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._utils.compiled import kernel
-from ..._utils.kdtree import pair_less
+from ..._utils.kdtree import insert_ranked, pair_less
 from ..._utils.threads import run_blocks
 from ._neighbors import HopSearch
 
@@ -292,17 +292,8 @@ def _nearest_of_lists(start, stop, points, lists, out_index, out_sq):  # pragma:
             o1 = points[j, 1] - points[i, 1]
             o2 = points[j, 2] - points[i, 2]
             d = (o0 * o0 + o1 * o1) + o2 * o2
-            if size == k and not pair_less(d, j, out_sq[i, k - 1], out_index[i, k - 1]):
-                continue
-            r = size if size < k else k - 1
-            while r > 0 and pair_less(d, j, out_sq[i, r - 1], out_index[i, r - 1]):
-                out_sq[i, r] = out_sq[i, r - 1]
-                out_index[i, r] = out_index[i, r - 1]
-                r -= 1
-            out_sq[i, r] = d
-            out_index[i, r] = j
-            if size < k:
-                size += 1
+            if size < k or pair_less(d, j, out_sq[i, k - 1], out_index[i, k - 1]):
+                size = insert_ranked(out_sq[i], out_index[i], size, d, j)
 
 
 def _thin(
