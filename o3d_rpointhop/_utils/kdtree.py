@@ -410,7 +410,8 @@ def _query(
             out_dist[i, e] = dist[e]
 
 
-def search_room(k: int) -> int:
+@kernel(inline="always")
+def search_room(k: int) -> int:  # pragma: no cover - compiled
     """Scratch entries a query of ``k`` neighbours gathers into: every point of the
     leaves its guessed radius reaches (a few times ``k``) is written there."""
     return 8 * k + 128

@@ -18,8 +18,10 @@ __all__ = ["frame_of", "local_reference_frames", "median_of"]
 
 # A skew (mean minus median) smaller than this fraction of the neighbourhood's extent is
 # treated as no skew at all: on a perfectly flat or symmetric patch it is rounding noise,
-# whose sign would change with any rotation of the cloud.
-_SKEW_TOLERANCE = 1e-9
+# whose sign would change with any rotation of the cloud. A millionth: a cloud moved to
+# survey coordinates is rounded there to about 1e-9 m, under it for neighbourhoods
+# down to a few millimetres.
+_SKEW_TOLERANCE = 1e-6
 # Jacobi sweeps stop once the off-diagonal part is this small against the diagonal
 # (a few sweeps: the method converges quadratically).
 _JACOBI_TOLERANCE = 1e-30

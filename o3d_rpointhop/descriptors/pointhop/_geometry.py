@@ -39,7 +39,7 @@ from ..._utils.threads import run_blocks
 from ._attributes import eigen_features
 from ._config import HopConfig
 from ._frames import frame_of
-from ._neighbors import HopSearch
+from ._neighbors import HopSearch, tie_ranks
 from ._octants import N_OCTANTS, bins_of, cylindrical_of, means_of
 from ._sampling import hop_subsets, resolve_method
 
@@ -341,6 +341,17 @@ def _frames_and_full_hops(
     return frames, eigenvalues, mean_dist, hop1, stored
 
 
+def _centred(points: np.ndarray, viewpoint: np.ndarray | None):
+    """The cloud and the viewpoint moved by the cloud's centroid, in float64: every
+    later step (the tie ranks, the sampling's start, the frames' orientation) then
+    sees the same numbers, up to rounding near the origin, wherever the cloud lies."""
+    points = np.asarray(points, dtype=np.float64)
+    centre = points.mean(axis=0)
+    if viewpoint is not None:
+        viewpoint = np.asarray(viewpoint, dtype=np.float64) - centre
+    return np.ascontiguousarray(points - centre), viewpoint
+
+
 def build_geometry(
     points: np.ndarray,
     config: HopConfig,
@@ -368,7 +379,7 @@ def build_geometry(
         frame's normal axis then points towards it (see
         :func:`~._frames.local_reference_frames`).
     """
-    points = np.ascontiguousarray(points, dtype=np.float64)
+    points, viewpoint = _centred(points, viewpoint)
     n = len(points)
     if not np.any(points != points[0]):
         raise ValueError("the cloud has no spatial extent: all its points coincide")
@@ -378,7 +389,8 @@ def build_geometry(
     full = [0] + [h for h in range(1, n_hops) if sizes[h - 1] == n]
     k_search = max([config.lrf_neighbors - 1] + [config.n_neighbors[h] for h in full])
     levels = tuple(config.n_neighbors[h] for h in full)
-    search = HopSearch(points)
+    ranks = tie_ranks(points)
+    search = HopSearch(points, ranks=ranks)
     method = resolve_method(config.sampling, n)
     found = graph = None
     if method == "fps" or n <= GEOMETRY_CHUNK:
@@ -389,7 +401,7 @@ def build_geometry(
             None, k_search, levels, n_mean=config.lrf_neighbors - 1, n_threads=n_threads
         )
         found, graph = (neighbours, mean_dist), (neighbours, reach)
-    drawn = hop_subsets(points, sizes if for_fit else sizes[:-1], method, graph, n_threads)
+    drawn = hop_subsets(points, sizes if for_fit else sizes[:-1], method, graph, n_threads, ranks)
     samples = [_whole(s, n) for s in drawn]
     sources = [None] + samples[: n_hops - 1]
     queries = samples if for_fit else samples + [None]
@@ -406,7 +418,8 @@ def build_geometry(
         if h in full:
             neighbours, bins = stored.pop(h)
         else:
-            neighbours = HopSearch(points, src).neighbours(qry, k, n_threads=n_threads)[0]
+            hop_search = HopSearch(points, src, ranks)
+            neighbours = hop_search.neighbours(qry, k, n_threads=n_threads)[0]
             rows = np.arange(n) if qry is None else qry
             bins = np.empty(neighbours.shape, np.uint8)
             run_blocks(
@@ -446,7 +459,7 @@ def cloud_frames(
     """The local reference frame of every point of a validated cloud, as the hops use
     it: ``(n, 3, 3)``, ``frames[i, :, j]`` axis ``j`` of point ``i`` (the third is the
     normal)."""
-    points = np.ascontiguousarray(points, dtype=np.float64)
+    points, viewpoint = _centred(points, viewpoint)
     frames_only = HopConfig(
         hop_sizes=(1.0,),
         n_neighbors=(config.lrf_neighbors - 1,),

@@ -39,8 +39,9 @@ _SHELLS_SQ = (0.25, 0.5, 0.75)
 # Coordinates within this fraction of the neighbourhood's extent of an octant boundary
 # count as positive. A point exactly on a boundary (a coplanar neighbour's normal
 # coordinate, a duplicate of the query) then lands in the same octant in every frame,
-# instead of flipping with the last bit of floating point rounding.
-_BOUNDARY_TOLERANCE = 1e-9
+# instead of flipping with the last bit of floating point rounding (at survey
+# coordinates, about 1e-9 m: under a millionth of neighbourhoods down to millimetres).
+_BOUNDARY_TOLERANCE = 1e-6
 
 
 @kernel()

@@ -34,7 +34,7 @@ import numpy as np
 from ..._utils.compiled import kernel
 from ..._utils.kdtree import insert_ranked, pair_less
 from ..._utils.threads import run_blocks
-from ._neighbors import HopSearch
+from ._neighbors import HopSearch, key_ceiling, tie_key, tie_ranks
 
 __all__ = [
     "FPS_MAX_POINTS",
@@ -56,11 +56,11 @@ _COMPETITORS = 8
 _GOLDEN = 0.6180339887498949
 
 
-def invariant_start(points: np.ndarray) -> int:
-    """Index of the point farthest from the centroid: the same point after any rigid motion
-    or permutation (barring exact ties)."""
-    centred = points - points.mean(axis=0)
-    return int(np.argmax(np.einsum("ij,ij->i", centred, centred)))
+def invariant_start(points: np.ndarray, ranks: np.ndarray | None = None) -> int:
+    """Index of the point farthest from the centroid (the highest of its
+    :func:`~._neighbors.tie_ranks`, given as ``ranks`` or computed): the same point
+    after any rigid motion or permutation."""
+    return int(np.argmax(tie_ranks(points) if ranks is None else ranks))
 
 
 @kernel()
@@ -108,21 +108,26 @@ def _heap_pop(keys, items, size):  # pragma: no cover - compiled
 
 @kernel()
 def _farthest_points(
-    points, candidates, m, start, neighbours, reach
+    points, candidates, m, start, neighbours, reach, ranks
 ):  # pragma: no cover - compiled
     """Positions (among ``candidates``, rows of ``points``) of the ``m``-point farthest
     point sample from position ``start``, in the order picked.
 
-    Every step picks the candidate farthest from those picked (the lowest position
-    among equals) and lowers the others' distances to the picked set. A pick can only
-    lower the distances of candidates closer to it than the distance it was picked at
-    (the largest of all); when those all lie within its ``neighbours`` (a row of the
-    cloud's k-nearest lists, ``reach`` its k-th squared distance: empty arrays for
-    none), only they are updated and the next pick comes from a lazy max-heap. Either
+    Every step picks the candidate farthest from those picked (by the distance's
+    :func:`~._neighbors.tie_key`, then the lowest of the rows' ``ranks``, so that the
+    same point is picked in any frame) and lowers the others' distances to the picked
+    set. A pick can only lower the distances of candidates closer to it than the
+    distance it was picked at (the largest of all); when those all lie within its
+    ``neighbours`` (a row of the cloud's k-nearest lists, ``reach`` a squared distance
+    within which every point is among them: empty arrays for none), only they are
+    updated and the next pick comes from a lazy max-heap. Either
     way the picks are those of the full update, to the bit.
     """
     c = candidates.shape[0]
     k = neighbours.shape[1]
+    rank = np.empty(c, np.int64)  # heap items: rank * c + position, lower on top
+    for t in range(c):
+        rank[t] = ranks[candidates[t]]
     position = np.full(points.shape[0], -1, np.int64)
     for t in range(c):
         position[candidates[t]] = t
@@ -147,7 +152,7 @@ def _farthest_points(
                 size = 0
                 for t in range(c):
                     if nearest[t] >= 0.0:
-                        size = _heap_push(keys, items, size, nearest[t], t)
+                        size = _heap_push(keys, items, size, tie_key(nearest[t]), rank[t] * c + t)
                 heaped = True
             for e in range(k):
                 j = neighbours[row, e]
@@ -159,14 +164,15 @@ def _farthest_points(
                     d = (d0 * d0 + d1 * d1) + d2 * d2
                     if d < nearest[t]:
                         nearest[t] = d
-                        size = _heap_push(keys, items, size, d, t)
-            while size > 0 and keys[0] != nearest[items[0]]:
+                        size = _heap_push(keys, items, size, tie_key(d), rank[t] * c + t)
+            while size > 0 and keys[0] != tie_key(nearest[items[0] % c]):
                 size = _heap_pop(keys, items, size)  # stale: lowered since, or picked
             if step + 1 < m:
-                current = items[0]
-                radius = keys[0]
+                current = items[0] % c
+                radius = key_ceiling(keys[0])
         else:
             best = -1.0
+            best_rank = 0
             for t in range(c):
                 if nearest[t] >= 0.0:
                     j = candidates[t]
@@ -180,22 +186,26 @@ def _farthest_points(
                             if size == capacity:
                                 heaped = False
                             else:
-                                size = _heap_push(keys, items, size, d, t)
-                    if nearest[t] > best:
-                        best = nearest[t]
+                                size = _heap_push(keys, items, size, tie_key(d), rank[t] * c + t)
+                    key = tie_key(nearest[t])
+                    if key > best or (key == best and rank[t] < best_rank):
+                        best = key
+                        best_rank = rank[t]
                         current = t
-            radius = best
+            radius = key_ceiling(best)
     return picked
 
 
-def fps_subsets(points: np.ndarray, sizes: list[int], graph=None) -> list[np.ndarray]:
+def fps_subsets(
+    points: np.ndarray, sizes: list[int], graph=None, ranks: np.ndarray | None = None
+) -> list[np.ndarray]:
     """Nested farthest point samples of ``points``, one per requested size.
 
     The sampling starts at :func:`invariant_start`, so the samples move with the cloud
     under rigid motions and follow its rows under permutations. Farthest point sampling
     is greedy: the first ``m`` picks from a set that contains the first ``m'`` > ``m``
     picks are those same points (the pick that is farthest in the larger set is in the
-    smaller one, and the lowest such row in both). So one run picks the largest sample,
+    smaller one, and the lowest ranked such point in both). So one run picks the largest sample,
     and each smaller one is its first picks: nested even when distances tie.
 
     Parameters
@@ -208,6 +218,8 @@ def fps_subsets(points: np.ndarray, sizes: list[int], graph=None) -> list[np.nda
         and each list's largest squared distance ``(n,)``: the same samples, found
         touching only the neighbours a pick can affect (see
         :func:`_farthest_points`).
+    ranks : ndarray of int64, default=None
+        The rows' :func:`~._neighbors.tie_ranks` (computed if not given).
 
     Returns
     -------
@@ -226,9 +238,9 @@ def fps_subsets(points: np.ndarray, sizes: list[int], graph=None) -> list[np.nda
     if not drawn:
         return [everything for _ in sizes]
     neighbours, reach = graph if graph is not None else (np.empty((0, 0), np.int32), np.empty(0))
-    picks = _farthest_points(
-        points, everything, int(drawn[0]), invariant_start(points), neighbours, reach
-    )
+    ranks = tie_ranks(points) if ranks is None else ranks
+    start = invariant_start(points, ranks)
+    picks = _farthest_points(points, everything, int(drawn[0]), start, neighbours, reach, ranks)
     return [everything if m == n else np.sort(picks[:m]) for m in sizes]
 
 
@@ -279,11 +291,16 @@ def poisson_disk_subset(
 
 
 @kernel(nogil=True)
-def _nearest_of_lists(start, stop, points, lists, out_index, out_sq):  # pragma: no cover - compiled
+def _nearest_of_lists(
+    start, stop, points, lists, ranks, rows, out_index, out_sq
+):  # pragma: no cover - compiled
     """For the rows ``start:stop``, the ``k`` nearest of each row's candidates
-    ``lists[i]`` (by squared distance, then index, as the searches rank them; ``k`` the
-    width of ``out_index``), with their squared distances, nearest first."""
+    ``lists[i]`` (by the squared distance's ``tie_key``, then rank, as the searches
+    rank them; ``k`` the width of ``out_index``; ``rows``: the row of each rank), with
+    their squared distances, nearest first."""
     k = out_index.shape[1]
+    keys = np.empty(k)
+    kept_ranks = np.empty(k, np.int64)
     for i in range(start, stop):
         size = 0
         for e in range(lists.shape[1]):
@@ -291,9 +308,16 @@ def _nearest_of_lists(start, stop, points, lists, out_index, out_sq):  # pragma:
             o0 = points[j, 0] - points[i, 0]
             o1 = points[j, 1] - points[i, 1]
             o2 = points[j, 2] - points[i, 2]
-            d = (o0 * o0 + o1 * o1) + o2 * o2
-            if size < k or pair_less(d, j, out_sq[i, k - 1], out_index[i, k - 1]):
-                size = insert_ranked(out_sq[i], out_index[i], size, d, j)
+            key = tie_key((o0 * o0 + o1 * o1) + o2 * o2)
+            if size < k or pair_less(key, ranks[j], keys[k - 1], kept_ranks[k - 1]):
+                size = insert_ranked(keys, kept_ranks, size, key, ranks[j])
+        for e in range(k):
+            j = rows[kept_ranks[e]]
+            o0 = points[j, 0] - points[i, 0]
+            o1 = points[j, 1] - points[i, 1]
+            o2 = points[j, 2] - points[i, 2]
+            out_index[i, e] = j
+            out_sq[i, e] = (o0 * o0 + o1 * o1) + o2 * o2
 
 
 def _thin(
@@ -311,7 +335,9 @@ def _thin(
     if lists is not None and lists.shape[1] >= k:
         idx = np.empty((n, k), np.int64)
         sq = np.empty((n, k))
-        run_blocks(_nearest_of_lists, n, n_threads, points, lists, idx, sq)
+        ranks = tie_ranks(points)
+        rows = np.argsort(ranks)
+        run_blocks(_nearest_of_lists, n, n_threads, points, lists, ranks, rows, idx, sq)
     else:
         # The point itself left out.
         idx = HopSearch(points).neighbours(None, k, n_threads=n_threads)[0]
@@ -339,7 +365,12 @@ def resolve_method(method: str, n_points: int) -> str:
 
 
 def hop_subsets(
-    points: np.ndarray, sizes: list[int], method: str, graph=None, n_threads: int = 1
+    points: np.ndarray,
+    sizes: list[int],
+    method: str,
+    graph=None,
+    n_threads: int = 1,
+    ranks: np.ndarray | None = None,
 ) -> list[np.ndarray]:
     """Nested samples of ``points``, one per size (non-increasing), by ``method``.
 
@@ -347,11 +378,12 @@ def hop_subsets(
     ``"poisson"``: :func:`poisson_disk_subset`; ``"auto"``: FPS for clouds of at most
     :data:`FPS_MAX_POINTS` points, Poisson disks above. ``graph``: the cloud's k-nearest
     lists and their reach (:meth:`HopSearch.neighbours`), which both methods use;
-    ``n_threads``: the Poisson disks' searches.
+    ``n_threads``: the Poisson disks' searches; ``ranks``: the rows'
+    :func:`~._neighbors.tie_ranks`, which FPS breaks ties by.
     """
     method = resolve_method(method, len(points))
     if method == "fps":
-        return fps_subsets(points, sizes, graph)
+        return fps_subsets(points, sizes, graph, ranks)
     current = np.arange(len(points), dtype=np.int64)
     out: list[np.ndarray] = []
     for m in sizes:

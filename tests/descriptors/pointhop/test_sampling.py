@@ -171,7 +171,14 @@ def test_hop_neighbours_leave_the_query_out_and_serve_every_level():
     for s in (12, 11, 5, 3):  # the first s are the s nearest other points
         np.testing.assert_array_equal(np.sort(nb[:, :s], axis=1), np.sort(order[:, 1 : s + 1], 1))
     sq = ((pts[nb] - pts[:, None]) ** 2).sum(-1)
-    np.testing.assert_allclose(reach, sq.max(axis=1))
+    # reach: the farthest neighbour's squared distance less its key's rounding, below
+    # which every other point is a neighbour.
+    assert np.all(reach <= sq.max(axis=1)) and np.all(reach >= sq.max(axis=1) * (1 - 1e-4))
+    everyone = ((pts[:, None] - pts[None]) ** 2).sum(-1)
+    outside = np.ones_like(everyone, dtype=bool)
+    np.put_along_axis(outside, nb, False, axis=1)
+    np.fill_diagonal(outside, False)
+    assert np.all(everyone[outside] >= np.broadcast_to(reach[:, None], everyone.shape)[outside])
     np.testing.assert_allclose(mean_dist, np.sqrt(sq[:, :3]).mean(axis=1))
     with pytest.raises(ValueError, match="cannot take 300 neighbours among 300"):
         HopSearch(pts).neighbours(None, 300)
