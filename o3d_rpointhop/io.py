@@ -7,6 +7,7 @@ import logging
 import os
 import threading
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -447,6 +448,8 @@ def _read_cloud(path: str | os.PathLike, mesh_points: int) -> o3d.geometry.Point
         if arr.ndim == 2 and arr.shape[1] > 3:
             arr = arr[:, :3]
         points = as_points(arr, name=str(path))
+        if arr.dtype == np.float32:
+            _warn_if_coarse(arr, path, depth=1)
         return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     raise ValueError(
         f"{path}: unknown point cloud format {suffix!r}; use one of {', '.join(READ_FORMATS)}"
@@ -491,22 +494,74 @@ def _las_grid(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return low, np.full(3, scale)
 
 
-def _write_las(path: Path, cloud, like, provenance) -> None:
+def _las_records(laspy, path: Path, files: Sequence, n_points: int):
+    """The point records of the LAS / LAZ ``files``, joined in order, in the first
+    file's point format (extra bytes included): ``(point_format, version, array)``.
+    Files of another point format are converted to it first (laspy's ``convert``, which
+    keeps the dimensions the formats share; the others are 0, said in one warning)."""
+    sources = []
+    for name in files:
+        try:
+            sources.append(laspy.read(str(name)))
+        except Exception as exc:
+            raise ValueError(
+                f"{name}: damaged or unreadable LAS file ({_first_line(exc)})"
+            ) from None
+    total = sum(len(s.points) for s in sources)
+    if total != n_points:
+        raise ValueError(
+            f"{path}: the cloud has {n_points} points, the LAS files it comes from {total}"
+        )
+    first = sources[0]
+    point_format = first.header.point_format
+    names = first.points.array.dtype.names
+    array = np.zeros(total, dtype=first.points.array.dtype)
+    start, lost = 0, set()
+    for name, source in zip(files, sources, strict=True):
+        if source.header.point_format.id != point_format.id:
+            source = laspy.convert(source, point_format_id=point_format.id)
+        have = source.points.array
+        missing = [n for n in names if n not in have.dtype.names]
+        if missing:
+            lost.add(Path(name).name)
+        for field in names:
+            if field in have.dtype.names:
+                array[field][start : start + len(have)] = have[field]
+        start += len(have)
+    if lost:
+        warnings.warn(
+            f"{path}: {', '.join(sorted(lost))} lack some of {Path(files[0]).name}'s point "
+            "dimensions; they are written as 0 for their points",
+            UserWarning,
+            stacklevel=4,
+        )
+    return point_format, str(first.header.version), array
+
+
+def _write_las(path: Path, cloud, like, provenance, las_points_of, keep_colours) -> None:
     laspy = _optional("laspy", path.suffix.lower())
     points = np.asarray(cloud.points)
     colours = np.asarray(cloud.colors) if cloud.has_colors() else None
+    records = None
+    if las_points_of:
+        point_format, version, records = _las_records(laspy, path, las_points_of, len(points))
     template = None
     if like is not None and Path(like).suffix.lower() in (".las", ".laz"):
         template = laspy.open(str(like)).header
     if template is not None:
-        point_format, version = template.point_format.id, str(template.version)
         offsets, scales = np.asarray(template.offsets), np.asarray(template.scales)
+        if records is None:
+            point_format, version = template.point_format.id, str(template.version)
     else:
-        point_format, version = 0, "1.2"
         offsets, scales = _las_grid(points)
-    names = set(laspy.PointFormat(point_format).dimension_names)
-    if colours is not None and not {"red", "green", "blue"} <= names:
+        if records is None:
+            point_format, version = 0, "1.2"
+    format_id = point_format if isinstance(point_format, int) else point_format.id
+    names = set(laspy.PointFormat(format_id).dimension_names)
+    has_rgb = {"red", "green", "blue"} <= names
+    if colours is not None and not has_rgb and records is None:
         point_format = 7 if version == "1.4" else 3  # the same format with colours
+        has_rgb = True
     header = laspy.LasHeader(point_format=point_format, version=version)
     header.offsets, header.scales = offsets, scales
     span = (points - offsets) / scales
@@ -522,8 +577,10 @@ def _write_las(path: Path, cloud, like, provenance) -> None:
             laspy.VLR(*LAS_RECORD, "o3d-rpointhop run", json.dumps(provenance).encode())
         )
     las = laspy.LasData(header)
+    if records is not None:
+        las.points = laspy.ScaleAwarePointRecord(records, header.point_format, scales, offsets)
     las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
-    if colours is not None:
+    if colours is not None and has_rgb and not (records is not None and keep_colours):
         rgb = np.round(np.clip(colours, 0, 1) * 65535).astype(np.uint16)
         las.red, las.green, las.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     las.write(str(path))
@@ -610,6 +667,8 @@ def write_cloud(
     *,
     like: str | os.PathLike | None = None,
     provenance: dict | None = None,
+    las_points_of: Sequence[str | os.PathLike] | None = None,
+    keep_colours: bool = True,
 ) -> None:
     """Write a cloud in the format its extension names.
 
@@ -631,6 +690,16 @@ def write_cloud(
         What made the cloud, JSON-ready: recorded in a LAS/LAZ file as a VLR (user id
         ``"o3d-rpointhop"``, record 1) and in a PLY header as ``comment`` lines;
         :func:`read_provenance` reads it back. The other formats have no place for it.
+    las_points_of : sequence of str or path-like, optional
+        LAS / LAZ files whose points, joined in order, are the cloud's points (moved: a
+        registered scan, merged scans): a LAS / LAZ output then keeps every dimension
+        of each point (intensity, return numbers, classification, GPS time, colours,
+        extra bytes, ...) in the first file's point format, with the cloud's
+        coordinates. ValueError when the counts differ.
+    keep_colours : bool, default=True
+        With ``las_points_of``: keep the files' own colour values (the cloud's colours
+        come from them); False writes the cloud's colours instead (scans painted by
+        scan).
     """
     path = check_output_path(path)
     cloud = _as_open3d(cloud)
@@ -638,7 +707,7 @@ def write_cloud(
     if suffix == ".npy":
         save_npy(path, np.asarray(cloud.points))
     elif suffix in (".las", ".laz"):
-        _write_las(path, cloud, like, provenance)
+        _write_las(path, cloud, like, provenance, las_points_of, keep_colours)
     elif suffix == ".e57":
         _write_e57(path, cloud)
     elif suffix in OPEN3D_FORMATS:

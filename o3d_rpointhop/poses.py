@@ -17,6 +17,7 @@ format             one record
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -73,6 +74,18 @@ def _as_poses(poses: Sequence, allow_missing: bool = False) -> list[np.ndarray |
     if not any(p is not None for p in out):
         raise ValueError("no poses to write")
     return out
+
+
+def _line(values) -> str:
+    """Numbers as text that reads back to the same doubles (the shortest such
+    decimal of each: survey coordinates keep every digit)."""
+    return " ".join(_number(float(v)) for v in values)
+
+
+def _number(value: float) -> str:
+    """The shortest decimal that reads back as ``value`` (``1`` for 1.0)."""
+    text = repr(value)
+    return text[:-2] if text.endswith(".0") else text
 
 
 def _rows(path: Path, width: int) -> np.ndarray:
@@ -158,10 +171,7 @@ def write_poses(
     lines = []
     if format == "kitti":
         lines = [
-            " ".join(["nan"] * 12)
-            if pose is None
-            else " ".join(f"{v:.9g}" for v in pose[:3].ravel())
-            for pose in poses
+            " ".join(["nan"] * 12) if pose is None else _line(pose[:3].ravel()) for pose in poses
         ]
     elif format == "tum":
         stamps = np.arange(len(poses), dtype=float) if timestamps is None else timestamps
@@ -170,7 +180,7 @@ def write_poses(
         for stamp, pose in zip(stamps, poses, strict=True):
             quat = Rotation.from_matrix(pose[:3, :3]).as_quat()  # x, y, z, w
             values = [float(stamp), *pose[:3, 3], *quat]
-            lines.append(" ".join(f"{v:.9g}" for v in values))
+            lines.append(_line(values))
     elif format == "3dmatch":
         ids = [(0, k) for k in range(len(poses))] if pairs is None else list(pairs)
         if len(ids) != len(poses):
@@ -178,7 +188,7 @@ def write_poses(
         total = len(poses) if n_fragments is None else int(n_fragments)
         for (i, j), pose in zip(ids, poses, strict=True):
             lines.append(f"{int(i)} {int(j)} {total}")
-            lines += [" ".join(f"{v:.9g}" for v in row) for row in pose]
+            lines += [_line(row) for row in pose]
     else:
         raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
     if comment is not None:
@@ -315,11 +325,25 @@ def read_poses(
 
 
 def read_matrix(path: str | os.PathLike) -> np.ndarray:
-    """One rigid 4x4 matrix from a text file (four rows of four numbers)."""
+    """One rigid 4x4 matrix: a text file of four rows of four numbers, or a JSON file
+    with a ``"transformation"`` (what ``register --transform T.json``, ``--json`` and
+    a saved result hold)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
-    rows = _rows(path, 4)
+    if path.suffix.lower() == ".json":
+        try:
+            body = json.loads(path.read_text())
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: not a JSON file: {exc}") from None
+        if not isinstance(body, dict) or "transformation" not in body:
+            raise ValueError(f'{path}: no "transformation" in this JSON file')
+        try:
+            rows = np.asarray(body["transformation"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}: the transformation is not a 4x4 matrix of numbers") from None
+    else:
+        rows = _rows(path, 4)
     return _check_pose(rows, str(path))
 
 
@@ -327,7 +351,7 @@ def write_matrix(path: str | os.PathLike, matrix) -> None:
     """One 4x4 matrix as four rows of text (what :func:`read_matrix` and ``--init``
     read)."""
     matrix = _check_pose(np.asarray(matrix, dtype=np.float64), "matrix")
-    np.savetxt(path, matrix, fmt="%.12g")
+    Path(path).write_text("".join(_line(row) + "\n" for row in matrix))
 
 
 def write_pose_graph(path: str | os.PathLike, pose_graph) -> None:

@@ -144,13 +144,18 @@ def translation_error(
     return float(np.linalg.norm(gap))
 
 
-def from_centred(transformation: np.ndarray, centre: np.ndarray) -> np.ndarray:
+def from_centred(
+    transformation: np.ndarray, centre: np.ndarray, source_centre: np.ndarray | None = None
+) -> np.ndarray:
     """A transformation of coordinates centred on ``centre`` (``x - centre``), for the
     coordinates they were centred from: ``x -> R (x - c) + t + c``; a stack ``(k, 4, 4)``
     transformation by transformation. A new float64 array; ``from_centred(T, -centre)``
-    goes the other way."""
+    goes the other way. ``source_centre``: the points it moves were centred on another
+    point (``x -> R (x - c_source) + t + c``), as between two scans each centred on its
+    own centroid."""
     out = np.array(transformation, dtype=np.float64)
-    out[..., :3, 3] += centre - out[..., :3, :3] @ centre
+    source = centre if source_centre is None else np.asarray(source_centre, dtype=np.float64)
+    out[..., :3, 3] += centre - out[..., :3, :3] @ source
     return out
 
 

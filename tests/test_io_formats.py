@@ -336,6 +336,110 @@ def test_reconstruct_writes_las_on_scan_0_s_grid(tmp_path):
     assert read_provenance(out)["config"]["register"]["seed"] == 0
 
 
+def _las_with_attributes(path, points, seed, point_format=3):
+    """A survey LAS file whose every point has its own intensity, return numbers,
+    classification, GPS time, colour and an extra-bytes dimension."""
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=point_format, version="1.2")
+    header.offsets, header.scales = OFFSET, np.array([0.001, 0.001, 0.001])
+    header.add_extra_dim(laspy.ExtraBytesParams(name="reflectance", type=np.float32))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    n = len(points)
+    las.intensity = rng.integers(0, 65535, n, dtype=np.uint16)
+    las.intensity[0] = 65534
+    las.return_number = rng.integers(1, 4, n)
+    las.number_of_returns = np.full(n, 3)
+    las.classification = rng.choice([2, 5, 6], n)
+    las.gps_time = 3e5 + np.cumsum(rng.random(n))
+    las.red, las.green, las.blue = rng.integers(0, 65536, (3, n), dtype=np.uint16)
+    las.reflectance = rng.random(n).astype(np.float32)
+    las.write(str(path))
+    return laspy.read(str(path))
+
+
+_KEPT = ("intensity", "return_number", "number_of_returns", "classification", "gps_time")
+
+
+def test_register_and_reconstruct_keep_every_las_dimension_of_every_point(tmp_path):
+    """A LAS / LAZ output of scans read from LAS files keeps each point's intensity,
+    returns, classification, GPS time, colour and extra bytes, with its new
+    coordinates (before, they were written as 0)."""
+    from helpers import partial_views
+
+    from o3d_rpointhop.cli import main
+
+    scans, _ = partial_views(3, seed=1)
+    inputs = [
+        _las_with_attributes(tmp_path / f"s{k}.las", OFFSET + scan, k)
+        for k, scan in enumerate(scans)
+    ]
+    out = tmp_path / "aligned.laz"
+    status = main(["register", str(tmp_path / "s1.las"), str(tmp_path / "s0.las"), "-o", str(out)])
+    assert status in (0, 3)
+    aligned = laspy.read(str(out))
+    source = inputs[1]
+    assert len(aligned.points) == len(source.points)
+    for name in (*_KEPT, "red", "green", "blue", "reflectance"):
+        np.testing.assert_array_equal(np.asarray(aligned[name]), np.asarray(source[name]), name)
+    merged_path = tmp_path / "merged.laz"
+    assert main(["reconstruct", str(tmp_path / "s*.las"), "-o", str(merged_path)]) == 0
+    merged = laspy.read(str(merged_path))
+    assert merged.header.point_format.id == 3
+    assert list(merged.point_format.extra_dimension_names) == ["reflectance"]
+    for name in (*_KEPT, "red", "blue", "reflectance"):
+        joined = np.concatenate([np.asarray(las[name]) for las in inputs])
+        np.testing.assert_array_equal(np.asarray(merged[name]), joined, name)
+    assert merged.intensity.max() == 65534 and set(np.unique(merged.classification)) == {2, 5, 6}
+
+
+def test_reconstruct_keeps_the_colours_of_the_scans_that_have_them(tmp_path):
+    """One scan without colours among coloured ones: the others keep theirs (before,
+    every colour was dropped), its points are grey, and a warning says which."""
+    import warnings
+
+    from helpers import partial_views
+
+    from o3d_rpointhop import register_multiway
+    from o3d_rpointhop.registration.result import UNCOLOURED
+
+    scans, _ = partial_views(3, seed=1)
+    clouds = []
+    for k, scan in enumerate(scans):
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scan))
+        if k != 1:
+            cloud.paint_uniform_color([0.1 * (k + 1), 0.2, 0.3])
+        clouds.append(cloud)
+    result = register_multiway(clouds, seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        merged = result.merge(clouds, voxel_size=None, colour=False)
+    assert merged.has_colors() and any(
+        "scans [1] have no colours" in str(w.message) for w in caught
+    )
+    colours = np.asarray(merged.colors)
+    sizes = np.cumsum([0] + [len(s) for s in scans])
+    np.testing.assert_allclose(colours[: sizes[1]], [[0.1, 0.2, 0.3]] * sizes[1])
+    np.testing.assert_allclose(colours[sizes[1] : sizes[2]], [UNCOLOURED] * len(scans[1]))
+    np.testing.assert_allclose(colours[sizes[2] :], [[0.3, 0.2, 0.3]] * len(scans[2]))
+
+
+def test_a_mesh_is_built_at_survey_coordinates(tmp_path):
+    """The merged scans are meshed about their centre (at UTM coordinates Qhull, in
+    orienting the normals, failed) and the mesh is put back where the scans are."""
+    from helpers import partial_views
+
+    from o3d_rpointhop import register_multiway
+
+    scans, _ = partial_views(3, seed=1)
+    far = [scan + OFFSET for scan in scans]
+    result = register_multiway(far, seed=0)
+    mesh = result.mesh(far, depth=6)
+    vertices = np.asarray(mesh.vertices)
+    assert len(mesh.triangles) > 100
+    assert np.abs(vertices.mean(axis=0) - np.vstack(far).mean(axis=0)).max() < 1.0
+
+
 def test_every_reader_of_float32_files_says_when_they_are_too_coarse(tmp_path):
     """A float32 PLY, a PCD (Open3D writes float32) and a single-precision E57 scan at
     UTM coordinates warn when read (pointing at the caller), a PCD warns when written

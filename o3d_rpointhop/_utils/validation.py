@@ -95,10 +95,15 @@ def as_points(X: Any, name: str = "X", min_points: int = 1) -> np.ndarray:
             f"{name} must be an (n_points, 3) array of xyz coordinates, got shape {arr.shape}. "
             "Reshape your data, e.g. with X.reshape(-1, 3) for a flat list of coordinates"
         )
-    if arr.shape[1] != 3:
+    if arr.shape[1] < 3:  # worded as scikit-learn's check_array, which its checks expect
         raise ValueError(
             f"{name} has {arr.shape[1]} feature(s) (shape={arr.shape}) while a minimum of 3 is "
             "required: it must be an (n_points, 3) array of xyz coordinates"
+        )
+    if arr.shape[1] > 3:
+        raise ValueError(
+            f"{name} has {arr.shape[1]} feature(s) (shape={arr.shape}), not 3: it must be an "
+            "(n_points, 3) array of xyz coordinates; pass X[:, :3] for the coordinates alone"
         )
     n = arr.shape[0]
     if n == 0:

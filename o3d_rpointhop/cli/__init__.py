@@ -33,6 +33,7 @@ from ._common import (
     EXIT_ERROR,
     EXIT_OK,
     EXIT_UNRELIABLE,
+    EXIT_UNTRUSTED,
     EXIT_USAGE,
     MAX_OUTPUT_BYTES,
     PROG,
@@ -45,6 +46,7 @@ __all__ = [
     "EXIT_ERROR",
     "EXIT_OK",
     "EXIT_UNRELIABLE",
+    "EXIT_UNTRUSTED",
     "EXIT_USAGE",
     "MAX_OUTPUT_BYTES",
     "CommandError",
@@ -73,6 +75,7 @@ def build_parser(
     options are declared in full, otherwise only their names and help lines."""
     parser = argparse.ArgumentParser(
         prog=PROG,
+        allow_abbrev=False,
         description="Rotation-invariant R-PointHop descriptors and registration for Open3D.",
         epilog=EXIT_CODES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -94,7 +97,9 @@ def build_parser(
         help="errors only on stderr: no warnings (the exit status still says when a "
         "result is flagged)",
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", help="what to do (COMMAND --help)"
+    )
 
     chosen = _chosen(argv)
 
@@ -102,6 +107,7 @@ def build_parser(
         @staticmethod
         def add_parser(name, **kwargs):
             kwargs.setdefault("epilog", EXIT_CODES)
+            kwargs.setdefault("allow_abbrev", False)  # --voxel is not --voxel-size
             kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
             sub = commands.add_parser(name, **kwargs)
             if not every and name != chosen:
@@ -137,6 +143,11 @@ def _log_to_stderr(verbose: int, quiet: bool) -> None:
     logger.propagate = False
 
 
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """A Python warning as one ``o3d-rpointhop: warning: ...`` line, without its source."""
+    logging.getLogger("o3d_rpointhop.cli").warning(" ".join(str(message).split()))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(argv)
     args = parser.parse_args(argv)
@@ -145,6 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with warnings.catch_warnings():
             if args.quiet:  # the library's warnings too
                 warnings.simplefilter("ignore")
+            warnings.showwarning = _warning_line
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 import logging
+import warnings
+from collections.abc import Sequence
 
 PROG = "o3d-rpointhop"
 #: The shipped models' names (``descriptors.PRETRAINED_MODELS``, written out so that
@@ -14,7 +16,7 @@ SHIPPED_MODELS = ("modelnet40", "object", "scene")
 POSE_FORMATS = ("kitti", "tum", "3dmatch")
 
 #: Exit statuses (listed in ``--help``).
-EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_UNRELIABLE = 0, 1, 2, 3
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_UNRELIABLE, EXIT_UNTRUSTED = 0, 1, 2, 3, 4
 EXIT_CODES = f"""exit status:
   {EXIT_OK}  success
   {EXIT_ERROR}  error: a missing, empty, damaged or unreadable file, a directory given as a
@@ -26,7 +28,11 @@ EXIT_CODES = f"""exit status:
   {EXIT_UNRELIABLE}  register/demo finished, but the result is flagged: not converged (no
      overlap, or a chance alignment) or ambiguous (a symmetric shape); reconstruct
      finished with unconnected scans left out; outputs are written, and stderr says
-     which"""
+     which
+  {EXIT_UNTRUSTED}  register finished and converged, but the result is not to be trusted: too
+     few of its matches agree with it (support under 0.01) or a cloud's coordinates were
+     rounded before reading (float32 at survey coordinates); outputs are written, and
+     stderr says why in one line"""
 #: Largest output written without --force.
 MAX_OUTPUT_BYTES = 512 * 1024**2
 #: What ``--descriptor`` names.
@@ -211,6 +217,52 @@ def load_model(name: str | None, n_components: int | None = None):
 
 #: Where the commands' warnings go (stderr, unless -q; see ``cli.main``).
 log = logging.getLogger("o3d_rpointhop.cli")
+
+
+def read_noting_precision(path: str, rounded: list[str]):
+    """``io.read_cloud(path)``, with ``path`` added to ``rounded`` (and said in one
+    line) when the file stored coordinates too coarse for the cloud."""
+    from ..io import PrecisionWarning, read_cloud
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", PrecisionWarning)
+        cloud = read_cloud(path)
+    for warning in caught:
+        if issubclass(warning.category, PrecisionWarning):
+            rounded.append(path)
+            log.warning(str(warning.message))
+        else:
+            warnings.warn(warning.message, warning.category, stacklevel=2)
+    return cloud
+
+
+def trust_problems(result, rounded: Sequence[str] = ()) -> list[str]:
+    """Why a converged, unambiguous result is not to be trusted (empty when it is):
+    support under :data:`~o3d_rpointhop.registration.defaults.TRUST_SUPPORT`, or
+    clouds (``rounded``: their files) whose coordinates were rounded when stored."""
+    from ..registration.defaults import TRUST_SUPPORT
+
+    problems = []
+    support = result.support
+    if support is not None and support < TRUST_SUPPORT:
+        problems.append(
+            f"little support: {support:.2%} of the matches agree with the pose, under the "
+            f"{TRUST_SUPPORT:.0%} below which results are most often wrong"
+        )
+    problems += [f"{name} was stored with too little precision to register" for name in rounded]
+    return problems
+
+
+def trust_status(result, problems: Sequence[str]) -> int:
+    """Exit status of a finished registration: 3 when flagged (:func:`flag_status`),
+    else 4 with one warning line per problem when ``problems`` (from
+    :func:`trust_problems`), else 0."""
+    status = flag_status(result)
+    if status != EXIT_OK or not problems:
+        return status
+    for problem in problems:
+        log.warning(f"the result is not to be trusted: {problem}")
+    return EXIT_UNTRUSTED
 
 
 def flag_status(result) -> int:

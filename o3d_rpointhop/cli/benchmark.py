@@ -25,7 +25,7 @@ def add_parser(commands) -> None:
         f"multiway: {', '.join(OBJECTS)} (every scan from an unknown pose, rebuilt with "
         "register_multiway)."
     )
-    p.add_argument("dataset", choices=[*DATASETS, "multiway"])
+    p.add_argument("dataset", choices=[*DATASETS, "multiway"], help="what to run the methods on")
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
     p.add_argument(
         "--methods",

@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import write_cloud
     from ..open3d_interop import to_point_cloud
     from ..plotting import save_registration_png
+    from ..poses import write_matrix
     from ..registration import register
     from ..transforms import rotation_error_deg, translation_error
 
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     source, target, truth, name = _sample_pair(args)
     result = register(source, target)  # the pretrained R-PointHop model, RANSAC, then ICP
     write_cloud(out / "aligned.ply", to_point_cloud(source).transform(result.transformation))
-    np.savetxt(out / "transform.txt", result.transformation, fmt="%.10f")
+    write_matrix(out / "transform.txt", result.transformation)
     picture = out / "before_after.png"
     errors = None
     if truth is not None:

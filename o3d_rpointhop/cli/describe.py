@@ -21,7 +21,7 @@ from ._config import descriptor_from, load_config, run_record, write_record
 
 def add_parser(commands) -> None:
     p = commands.add_parser("describe", help="write one descriptor per point of a cloud (.npy)")
-    p.add_argument("cloud")
+    p.add_argument("cloud", help="the cloud to describe (.ply, .las, .e57, .npy, ...)")
     p.add_argument(
         "-o",
         "--output",

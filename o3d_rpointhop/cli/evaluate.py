@@ -24,8 +24,8 @@ def add_parser(commands) -> None:
         "would be magnified by its distance), and the RMS displacement of the source's "
         "points between the two transformations.",
     )
-    p.add_argument("source")
-    p.add_argument("target")
+    p.add_argument("source", help="the cloud the transformation moves")
+    p.add_argument("target", help="the cloud it moves the source onto")
     p.add_argument("--transform", required=True, help="text file with the 4x4 transformation")
     p.add_argument("--truth", help="text file with the ground-truth 4x4 transformation")
     p.add_argument(

@@ -61,14 +61,44 @@ def add_parser(commands) -> None:
         default=argparse.SUPPRESS,
         help="principal axes the model keeps ('none': the full descriptor)",
     )
-    p.add_argument("--pooling", choices=["octants", "azimuth"])
+    p.add_argument(
+        "--pooling",
+        choices=["octants", "azimuth"],
+        help="the eight bins each neighbourhood is averaged over: the local frame's octants "
+        "(R-PointHop's, default) or above / below the tangent plane times four distance "
+        "shells (only the normal axis counts: walls and floors)",
+    )
     p.add_argument("--n-neighbors", type=_ints, help="per hop, e.g. 64,32,48,48")
     p.add_argument("--hop-sizes", type=_sizes, help="per hop, e.g. 1.0,0.75,0.5,0.375")
-    p.add_argument("--lrf-neighbors", type=int)
-    p.add_argument("--energy-threshold", type=float)
-    p.add_argument("--fit-subsample", type=int)
-    p.add_argument("--n-jobs", type=int)
-    p.add_argument("--random-state", type=int)
+    p.add_argument(
+        "--lrf-neighbors",
+        type=int,
+        help="points whose principal axes give each point's local frame (default 64; the "
+        "paper's scene variant: 256)",
+    )
+    p.add_argument(
+        "--energy-threshold",
+        type=float,
+        help="channels whose share of the variance falls below this are not passed to the "
+        "next hop (default 0.001)",
+    )
+    p.add_argument(
+        "--fit-subsample",
+        type=int,
+        help="draw at most this many points of each training cloud at random (the paper: "
+        "1024 of ModelNet40's 2048; default: every point)",
+    )
+    p.add_argument(
+        "--n-jobs",
+        type=int,
+        help="processes over the training clouds (-1: every core; default 1); the model "
+        "does not depend on it",
+    )
+    p.add_argument(
+        "--random-state",
+        type=int,
+        help="seeds --fit-subsample (everything else is deterministic; default: unseeded)",
+    )
     add_viewpoints(p, "training cloud")
     add_config(p)
     p.set_defaults(func=run)

@@ -19,16 +19,26 @@ def add_parser(commands) -> None:
         "Scans without a pose stay without one: a line of nan in KITTI, left out in TUM "
         "and .log (which cannot mark them).",
     )
-    actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    actions = p.add_subparsers(
+        dest="action", required=True, metavar="ACTION", help="convert: between formats"
+    )
     convert = actions.add_parser(
         "convert",
         help="read INPUT in one format, write OUTPUT in another",
         description="Read INPUT as --from and write OUTPUT as --to, scan by scan.",
     )
-    convert.add_argument("input")
-    convert.add_argument("output")
-    convert.add_argument("--from", dest="source_format", choices=POSE_FORMATS, required=True)
-    convert.add_argument("--to", dest="target_format", choices=POSE_FORMATS, required=True)
+    convert.add_argument("input", help="the trajectory file to read")
+    convert.add_argument("output", help="the trajectory file to write")
+    convert.add_argument(
+        "--from",
+        dest="source_format",
+        choices=POSE_FORMATS,
+        required=True,
+        help="INPUT's format",
+    )
+    convert.add_argument(
+        "--to", dest="target_format", choices=POSE_FORMATS, required=True, help="OUTPUT's format"
+    )
     convert.add_argument(
         "--scans",
         type=int,

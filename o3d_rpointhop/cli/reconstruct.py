@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 from ._common import (
@@ -33,7 +34,9 @@ def add_parser(commands) -> None:
         "reconstruct",
         help="rebuild an object or scene from unposed scans (multiway registration)",
         description="Register every scan to scan 0 through a pose graph and write the "
-        "merged cloud: every point of every placed scan with its colours and normals, "
+        "merged cloud: every point of every placed scan with its colours and normals "
+        "(grey for scans without colours beside scans with them; from LAS / LAZ scans to a "
+        "LAS / LAZ output, every point dimension: intensity, classification, GPS time, ...), "
         "downsampled only with --output-voxel-size, coloured by scan with --colour-by-scan. "
         "Scans no other scan overlaps are reported and left out (exit status 3). "
         "--voxel-size is the registration's resolution, as register's is.",
@@ -149,6 +152,8 @@ def scan_paths(inputs: list[str]) -> list[str]:
             if not found:
                 raise CommandError(f"{item}: no file matches this pattern")
             out += found
+        elif not path.exists():
+            raise CommandError(f"{item}: no such file or folder")
         else:
             out.append(item)
     return out
@@ -198,11 +203,28 @@ def run(args: argparse.Namespace) -> int:
     if len(args.scans) < 2:
         raise CommandError(f"reconstruct needs two or more scans, got {len(args.scans)}")
     scans = [read_cloud(p) for p in args.scans]
-    result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, progress=None, **options)
+    try:
+        result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, progress=None, **options)
+    except ValueError as exc:  # name the files, not their places in the list
+        if not re.match(r"scan \d+: ", str(exc)):
+            raise
+        named = re.sub(r"scan (\d+)", lambda m: args.scans[int(m[1])], str(exc))
+        raise CommandError(named) from exc
     merged = result.merge(scans, voxel_size=args.output_voxel_size, colour=args.colour_by_scan)
     check_size(args.output, cloud_bytes(merged), args.force, "downsample with --output-voxel-size")
-    # In scan 0's frame: a LAS/LAZ output keeps scan 0's grid (offsets, scales).
-    write_cloud(args.output, merged, like=args.scans[0], provenance=record)
+    # In scan 0's frame: a LAS/LAZ output keeps scan 0's grid (offsets, scales), and,
+    # when every point is kept and every scan is LAS / LAZ, every dimension of each.
+    placed = [p for p, pose in zip(args.scans, result.poses, strict=True) if pose is not None]
+    las = all(Path(p).suffix.lower() in (".las", ".laz") for p in placed)
+    every = args.output_voxel_size is None and las
+    write_cloud(
+        args.output,
+        merged,
+        like=args.scans[0],
+        provenance=record,
+        las_points_of=placed if every else None,
+        keep_colours=not args.colour_by_scan,
+    )
     summary = {**result.as_dict(list(args.scans)), "provenance": record}
     if args.poses:
         Path(args.poses).write_text(json.dumps(summary, indent=2))

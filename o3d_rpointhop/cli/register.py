@@ -20,9 +20,11 @@ from ._common import (
     add_viewpoints,
     check_size,
     cloud_bytes,
-    flag_status,
     global_points,
     positive_or_auto,
+    read_noting_precision,
+    trust_problems,
+    trust_status,
     vector,
 )
 from ._config import (
@@ -45,8 +47,8 @@ def add_parser(commands) -> None:
     )
     from ..registration.pipeline import GLOBAL_METHODS, REFINE_METHODS
 
-    p.add_argument("source")
-    p.add_argument("target")
+    p.add_argument("source", help="the cloud to move (.ply, .las, .e57, .bin, .npy, ...)")
+    p.add_argument("target", help="the cloud to move it onto")
     add_descriptor(p)
     add_model(p, default="the one-hop object model")
     p.add_argument(
@@ -105,8 +107,8 @@ def _is_las(path: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..io import check_output_path, read_cloud, write_cloud
-    from ..poses import read_matrix
+    from ..io import check_output_path, write_cloud
+    from ..poses import read_matrix, write_matrix
     from ..registration import RegistrationWarning, register
 
     # Settings, model and outputs are checked before any cloud is read.
@@ -128,8 +130,9 @@ def run(args: argparse.Namespace) -> int:
         if out:
             check_output_path(out)
     init = read_matrix(args.init) if args.init else None
-    source = read_cloud(args.source)
-    target = read_cloud(args.target)
+    rounded: list[str] = []
+    source = read_noting_precision(args.source, rounded)
+    target = read_noting_precision(args.target, rounded)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RegistrationWarning)  # reported below, once
@@ -143,19 +146,30 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:  # name the files, not just "source" and "target"
         raise CommandError(f"{exc} (source: {args.source}, target: {args.target})") from exc
     summary = result.as_dict()
-    summary.update({"source": args.source, "target": args.target, "provenance": record})
+    problems = trust_problems(result, rounded)
+    summary.update(
+        {
+            "trusted": result.converged and not result.ambiguous and not problems,
+            "trust_problems": problems,
+            "source": args.source,
+            "target": args.target,
+            "provenance": record,
+        }
+    )
     if args.output:
         aligned = type(source)(source).transform(result.transformation)  # a copy
         check_size(args.output, cloud_bytes(aligned), args.force, "downsample the source")
         # In the target's frame: a LAS/LAZ output keeps the target's grid when it is one.
         like = args.target if _is_las(args.target) else args.source
-        write_cloud(args.output, aligned, like=like, provenance=record)
+        # Every dimension of a LAS / LAZ source's points goes with them.
+        origin = [args.source] if _is_las(args.source) else None
+        write_cloud(args.output, aligned, like=like, provenance=record, las_points_of=origin)
         summary["aligned_cloud"] = args.output
     if args.transform:
         if args.transform.lower().endswith(".json"):
             Path(args.transform).write_text(json.dumps(summary, indent=2))
         else:
-            np.savetxt(args.transform, result.transformation, fmt="%.10f")
+            write_matrix(args.transform, result.transformation)
         summary["transform_file"] = args.transform
     if args.result:
         result.save(args.result, provenance=record)
@@ -169,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
             f"fitness {result.fitness:.3f}, inlier RMSE {result.inlier_rmse:.6g}, "
             f"voxel {result.voxel_size:.6g} ({steps})"
         )
-    status = flag_status(result)
+    status = trust_status(result, problems)
     if args.view:
         from ..viewer import show_registration
 

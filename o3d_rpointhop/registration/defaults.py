@@ -13,6 +13,7 @@ __all__ = [
     "DEFAULT_GLOBAL_POINTS",
     "REGISTRATION_COMPONENTS",
     "SCENE_FPFH_WEIGHT",
+    "TRUST_SUPPORT",
     "default_descriptor",
     "resolve_global_method",
     "resolve_global_points",
@@ -33,6 +34,13 @@ DEFAULT_MODEL = "object"
 #: 89.6 %, resampled-partial 43.8 / 45.8 / 45.8 %. 128 axes also make matching and
 #: RANSAC several times cheaper than 1624.
 REGISTRATION_COMPONENTS = 128
+
+#: The least ``RegistrationResult.support`` (share of the global step's matches the
+#: pose explains) of a result the command line trusts, chosen on every official pair
+#: of the scene model's four training scenes (``benchmarks/support_threshold.py``:
+#: the largest threshold keeping every right 3DMatch claim; 3DLoMatch claims right
+#: 74.0 -> 83.3 %). Right object results sit above it too (training crops: 0.011 up).
+TRUST_SUPPORT = 0.01
 
 #: Size of the global step's clouds when neither the call nor the descriptor names one.
 DEFAULT_GLOBAL_POINTS = 2048

@@ -154,13 +154,18 @@ def information_about(information: np.ndarray, origin: np.ndarray) -> np.ndarray
     return change.T @ information @ change
 
 
-def _graph_about(graph, origin: np.ndarray):
-    """The pose graph of scans centred on ``origin``, in the scans' own coordinates."""
-    for node in graph.nodes:
-        node.pose = from_centred(np.asarray(node.pose), origin)
+def _graph_about(graph, centres: list[np.ndarray], scans: list[int]):
+    """The pose graph of scans each centred on its own centroid (``centres``, by scan),
+    in the scans' own coordinates. Node ``m`` is scan ``scans[m]``, and its pose maps
+    into the first node's frame; an edge's information is about its target's points,
+    as Open3D measures it."""
+    root = centres[scans[0]]
+    for m, node in enumerate(graph.nodes):
+        node.pose = from_centred(np.asarray(node.pose), root, centres[scans[m]])
     for edge in graph.edges:
-        edge.transformation = from_centred(np.asarray(edge.transformation), origin)
-        edge.information = information_about(np.asarray(edge.information), origin)
+        i, j = scans[edge.target_node_id], scans[edge.source_node_id]
+        edge.transformation = from_centred(np.asarray(edge.transformation), centres[i], centres[j])
+        edge.information = information_about(np.asarray(edge.information), centres[i])
     return graph
 
 
@@ -172,6 +177,15 @@ def _full_normals(points: np.ndarray, settings: RegistrationSettings) -> np.ndar
     cloud.translate(-cloud.get_center())
     estimate_normals(cloud, settings.normal_radius)
     return np.asarray(cloud.normals).copy()
+
+
+def _prepare_scan(k: int, *args) -> PreparedCloud:
+    """:func:`~.prepared.prepare_cloud` of scan ``k``; its errors say which scan
+    (``scan k: ...``)."""
+    try:
+        return prepare_cloud(*args)
+    except ValueError as exc:
+        raise ValueError(f"scan {k}: {exc}") from exc
 
 
 def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
@@ -280,12 +294,13 @@ def register_multiway(
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     views = as_viewpoints(viewpoints, len(points))
-    # One frame for the whole run, centred on scan 0: edges, information matrices and
-    # the optimisation stay well conditioned at survey coordinates, and a scan set gives
-    # the same edges and poses wherever it lies. Results go back at the end.
-    origin = points[0].mean(axis=0)
-    points = [p - origin for p in points]
-    views = [None if v is None else v - origin for v in views]
+    # Every scan in its own frame centred on its centroid, for the whole run: edges,
+    # information matrices and the optimisation stay well conditioned at survey
+    # coordinates, and a scan set gives the same edges and poses wherever each of its
+    # scans lies, in one frame or several. Results go back at the end.
+    centres = [p.mean(axis=0) for p in points]
+    points = [p - c for p, c in zip(points, centres, strict=True)]
+    views = [None if v is None else v - c for v, c in zip(views, centres, strict=True)]
     worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
     # The screening step, resolved and checked as register() does (copied per pair).
     global_method = build_chain(global_method, None, worker)[0][1]
@@ -295,17 +310,28 @@ def register_multiway(
         voxel = float(voxel_size)
     settings = (settings or RegistrationSettings()).at(voxel)
     # Every scan is downsampled, described and given normals once, for all its pairs.
-    prepared = parallel_map(
-        prepare_cloud,
-        [
-            (p, voxel, worker, view, settings.normal_radius, settings)
-            for p, view in zip(points, views, strict=True)
-        ],
-        n_jobs=n_jobs,
-        progress=progress,
-        desc="describe",
-        unit="scan",
-    )
+    try:
+        prepared = parallel_map(
+            _prepare_scan,
+            [
+                (k, p, voxel, worker, view, settings.normal_radius, settings)
+                for k, (p, view) in enumerate(zip(points, views, strict=True))
+            ],
+            n_jobs=n_jobs,
+            progress=progress,
+            desc="describe",
+            unit="scan",
+        )
+    except ValueError as exc:
+        if voxel_size != "auto":
+            raise
+        # Say which scan made the common resolution as coarse as it is.
+        n_points = resolve_global_points(n_global_points, worker)
+        setter = int(np.argmax([common_voxel([p], n_points) for p in points]))
+        raise ValueError(
+            f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan {setter} "
+            f"({len(points[setter])} points) needs: too small a scan coarsens them all)"
+        ) from exc
     features = [p.features for p in prepared]
     candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
     log.info(
@@ -375,11 +401,17 @@ def register_multiway(
         len(points) - len(unconnected),
         len(points),
     )
-    poses = [None if p is None else from_centred(p, origin) for p in poses]
-    pairs = {pair: (from_centred(t, origin), f) for pair, (t, f) in pairs.items()}
+    placed = [k for k, p in enumerate(poses) if p is not None]  # the graph's nodes
+    poses = [
+        None if p is None else from_centred(p, centres[0], c)
+        for p, c in zip(poses, centres, strict=True)
+    ]
+    pairs = {
+        (i, j): (from_centred(t, centres[i], centres[j]), f) for (i, j), (t, f) in pairs.items()
+    }
     return MultiwayResult(
         poses=poses,
-        pose_graph=_graph_about(graph, origin),
+        pose_graph=_graph_about(graph, centres, placed),
         pairs=pairs,
         edges=kept,
         unconnected=unconnected,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ from ..open3d_interop import to_point_cloud
 
 __all__ = [
     "SCAN_COLOURS",
+    "UNCOLOURED",
     "MultiwayResult",
     "RegistrationResult",
     "StepResult",
@@ -370,6 +372,8 @@ SCAN_COLOURS = np.array(
         [0.09, 0.75, 0.81],
     ]
 )
+#: The colour of the points of scans without colours merged with scans that have them.
+UNCOLOURED = (0.5, 0.5, 0.5)
 
 
 @dataclass
@@ -421,7 +425,9 @@ class MultiwayResult:
             resolution, ``None`` keeps every point.
         colour : bool, default=True
             Paint each scan in its own colour (:data:`SCAN_COLOURS`, in scan order);
-            ``False`` keeps the scans' own colours and normals (turned with them).
+            ``False`` keeps the scans' own colours and normals (turned with them); when
+            only some scans have colours, the others' points are grey
+            (:data:`UNCOLOURED`), with a warning.
 
         Returns
         -------
@@ -430,7 +436,7 @@ class MultiwayResult:
         """
         if len(clouds) != len(self.poses):
             raise ValueError(f"{len(self.poses)} scans were registered, got {len(clouds)}")
-        merged = o3d.geometry.PointCloud()
+        parts = {}
         for k, (scan, pose) in enumerate(zip(clouds, self.poses, strict=True)):
             if pose is None:
                 continue
@@ -438,6 +444,21 @@ class MultiwayResult:
             part.transform(pose)  # turns the normals too
             if colour:
                 part.paint_uniform_color(SCAN_COLOURS[k % len(SCAN_COLOURS)])
+            parts[k] = part
+        # A cloud has colours on every point or on none: when only some scans have
+        # them, the others are filled with grey rather than every colour dropped.
+        bare = [k for k, part in parts.items() if not part.has_colors()]
+        if bare and len(bare) < len(parts):
+            for k in bare:
+                parts[k].paint_uniform_color(UNCOLOURED)
+            warnings.warn(
+                f"scans {bare} have no colours: their points are grey "
+                f"{list(UNCOLOURED)} in the merged cloud",
+                UserWarning,
+                stacklevel=2,
+            )
+        merged = o3d.geometry.PointCloud()
+        for part in parts.values():
             merged += part
         if voxel_size is None:
             return merged
@@ -469,10 +490,14 @@ class MultiwayResult:
         """
         voxel = voxel_size or self.voxel_size / 2
         merged = self.merge(clouds, voxel_size=voxel, colour=False)
+        # Meshed about the merged cloud's centre: Qhull (in the normals' orientation)
+        # and the Poisson solver lose precision at survey coordinates.
+        centre = merged.get_center()
+        merged.translate(-centre)
         merged.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=30))
         merged.orient_normals_consistent_tangent_plane(16)
         mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(merged, depth=depth)
-        return mesh
+        return mesh.translate(centre)
 
     def save(self, path: str | os.PathLike, provenance: dict | None = None) -> None:
         """Write the poses, the candidate pairs, the edges and the optimised pose graph

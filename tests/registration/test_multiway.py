@@ -43,6 +43,37 @@ def test_a_scan_set_at_survey_coordinates_gives_what_it_gives_at_the_origin():
         np.testing.assert_allclose(np.asarray(node.pose), pose, atol=1e-6)
 
 
+def test_scans_in_a_mix_of_frames_give_what_they_give_in_one():
+    """One scan at UTM coordinates and the others near the origin (or scan 0 far and
+    the rest near): each scan is centred on its own centroid for the whole run, so the
+    same edges and, carried back, the same poses and pair transformations (within 1e-6
+    of the scans' extent) as when every scan shares a frame."""
+    scans, truth = partial_views(4, seed=5)
+    extent = np.ptp(np.vstack(scans), axis=0).max()
+    utm = np.array([452_310.0, 5_211_870.0, 312.0])
+    shared = register_multiway(scans, seed=0)
+    assert shared.unconnected == [] and len(shared.edges) >= 3
+    for far in (2, 0):
+        offsets = [utm if k == far else np.zeros(3) for k in range(4)]
+        mixed = register_multiway([s + o for s, o in zip(scans, offsets, strict=True)], seed=0)
+        assert mixed.edges == shared.edges and mixed.unconnected == []
+
+        def back(pose, to, frm, offsets=offsets):  # from the mixed frames to the shared
+            into, out = np.eye(4), np.eye(4)
+            into[:3, 3], out[:3, 3] = -offsets[to], offsets[frm]
+            return into @ pose @ out
+
+        for k in range(4):
+            moved = back(mixed.poses[k], 0, k)
+            np.testing.assert_allclose(moved[:3, :3], shared.poses[k][:3, :3], atol=1e-6)
+            np.testing.assert_allclose(moved[:3, 3], shared.poses[k][:3, 3], atol=1e-6 * extent)
+            assert rotation_error_deg(moved, truth[k]) < 2.0
+        for (i, j), (t, _) in mixed.pairs.items():
+            np.testing.assert_allclose(back(t, i, j), shared.pairs[(i, j)][0], atol=1e-6 * extent)
+        for node, pose in zip(mixed.pose_graph.nodes, mixed.poses, strict=True):
+            np.testing.assert_allclose(np.asarray(node.pose), pose, atol=1e-6 * extent)
+
+
 def test_information_matrices_move_with_the_frame():
     """information_about gives what Open3D measures on the uncentred clouds."""
     import open3d as o3d

@@ -147,7 +147,7 @@ def test_the_view_command_serves_saved_results_and_transforms(tmp_path, monkeypa
     assert main(["view", str(tmp_path / "missing.json"), *files]) == 1
     (tmp_path / "garbage.json").write_text("{not json")
     assert main(["view", str(tmp_path / "garbage.json"), *files]) == 1
-    assert "garbage.json, line 1: not numbers" in capsys.readouterr().err
+    assert "garbage.json: not a JSON file" in capsys.readouterr().err
     # A saved multiway result is shown with every scan, named by its file.
     from o3d_rpointhop.registration import MultiwayResult
 
