@@ -45,7 +45,8 @@ def add_parser(commands) -> None:
         "scans",
         nargs="+",
         help="two or more scans (.ply, .las, .laz, .e57, .bin, .npy, ...), folders (every "
-        "scan file in them but .txt / .csv, by name) or quoted glob patterns",
+        "scan file in them but .txt / .csv, in natural order: scan_9 before scan_10) or quoted "
+        "glob patterns (also in natural order); -v prints the order",
     )
     p.add_argument("-o", "--output", required=True, help="merged cloud to write (.ply, ...)")
     p.add_argument("--poses", help="write the poses (scan -> scan 0), edges and flags as JSON")
@@ -124,12 +125,21 @@ def add_parser(commands) -> None:
     p.set_defaults(func=run)
 
 
+def natural_key(path: str) -> tuple:
+    """Sort key of a file name in the order people mean: runs of digits compared as
+    numbers (``scan_9`` before ``scan_10``, ``cloud_bin_3`` before ``cloud_bin_23``),
+    the rest as text, case aside; the name as given breaks what remains tied."""
+    parts = re.split(r"(\d+)", str(path))
+    return [(0, int(p), "") if p.isdigit() else (1, 0, p.casefold()) for p in parts], str(path)
+
+
 def scan_paths(inputs: list[str]) -> list[str]:
     """The scan files the inputs name: a file as given; a folder, every file in it whose
     extension ``read_cloud`` reads as points (text tables left out: a folder of scans
-    often holds notes or poses too), sorted by name; a pattern with ``*``, ``?`` or
-    ``[`` that is not a file, the files it matches, sorted. CommandError for a folder
-    or pattern that names no scan."""
+    often holds notes or poses too), in natural order (:func:`natural_key`); a pattern
+    with ``*``, ``?`` or ``[`` that is not a file, the files it matches, in natural
+    order. CommandError for a folder or pattern that names no scan, or a path that
+    does not exist."""
     import glob
 
     from ..io import READ_FORMATS
@@ -140,7 +150,8 @@ def scan_paths(inputs: list[str]) -> list[str]:
         path = Path(item)
         if path.is_dir():
             found = sorted(
-                str(p) for p in path.iterdir() if p.is_file() and p.suffix.lower() in suffixes
+                (str(p) for p in path.iterdir() if p.is_file() and p.suffix.lower() in suffixes),
+                key=natural_key,
             )
             if not found:
                 raise CommandError(
@@ -148,7 +159,7 @@ def scan_paths(inputs: list[str]) -> list[str]:
                 )
             out += found
         elif not path.exists() and any(c in item for c in "*?["):
-            found = sorted(p for p in glob.glob(item) if Path(p).is_file())
+            found = sorted((p for p in glob.glob(item) if Path(p).is_file()), key=natural_key)
             if not found:
                 raise CommandError(f"{item}: no file matches this pattern")
             out += found
@@ -200,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
         if out:
             check_output_path(out)
     args.scans = scan_paths(args.scans)
+    log.info("scans, in this order (scan 0 first): %s", ", ".join(args.scans))
     if len(args.scans) < 2:
         raise CommandError(f"reconstruct needs two or more scans, got {len(args.scans)}")
     scans = [read_cloud(p) for p in args.scans]

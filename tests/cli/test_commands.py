@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import open3d as o3d
@@ -441,3 +442,26 @@ def test_register_exits_3_and_says_so_when_the_result_is_ambiguous(tmp_path, cap
     captured = capsys.readouterr()
     assert json.loads(captured.out)["ambiguous"] is True
     assert "ambiguous" in captured.err
+
+
+def test_folders_and_patterns_list_scans_in_natural_order(tmp_path):
+    """cloud_bin_3 before cloud_bin_23 and scan_9 before scan_10, in a folder and in a
+    pattern, as a person numbering files means them (by name, 23 came first)."""
+    from o3d_rpointhop.cli.reconstruct import scan_paths
+
+    names = ["cloud_bin_23.npy", "cloud_bin_3.npy", "cloud_bin_10.npy", "Cloud_bin_4.npy"]
+    for name in names:
+        np.save(tmp_path / name, np.zeros((1, 3)))
+    (tmp_path / "notes.txt").write_text("not a scan")
+    want = ["cloud_bin_3.npy", "Cloud_bin_4.npy", "cloud_bin_10.npy", "cloud_bin_23.npy"]
+    assert [Path(p).name for p in scan_paths([str(tmp_path)])] == want
+    assert [Path(p).name for p in scan_paths([str(tmp_path / "*.npy")])] == want
+    other = tmp_path / "scans"
+    other.mkdir()
+    for k in (10, 9, 100):
+        np.save(other / f"scan_{k}.npy", np.zeros((1, 3)))
+    assert [Path(p).name for p in scan_paths([str(other)])] == [
+        "scan_9.npy",
+        "scan_10.npy",
+        "scan_100.npy",
+    ]
