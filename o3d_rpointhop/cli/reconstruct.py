@@ -256,6 +256,8 @@ def run(args: argparse.Namespace) -> int:
         f"{len(result.edges)} edges kept, {result.seconds:.1f} s; merged cloud "
         f"({len(merged.points)} points) written to {args.output}"
     )
+    if result.frame != 0:
+        log.warning(f"{args.scans[0]} is not placed: the poses are in {summary['frame']}'s frame")
     if result.unconnected:
         names = ", ".join(summary["unconnected"])
         log.warning(f"unconnected (left out): {names}")

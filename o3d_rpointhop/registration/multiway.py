@@ -18,6 +18,7 @@ that no kept edge joins to scan 0 are reported as unconnected and get no pose.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import time
 import warnings
@@ -37,7 +38,7 @@ from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_points
 from .pipeline import RegistrationPipeline, build_chain
-from .pose_graph import optimise, poses_from_tree, spanning_tree
+from .pose_graph import largest_part, optimise, poses_from_tree, spanning_tree
 from .prepared import PreparedCloud, estimate_normals, prepare_cloud
 from .result import MultiwayResult
 from .settings import RegistrationSettings, common_voxel
@@ -154,19 +155,35 @@ def information_about(information: np.ndarray, origin: np.ndarray) -> np.ndarray
     return change.T @ information @ change
 
 
-def _graph_about(graph, centres: list[np.ndarray], scans: list[int]):
-    """The pose graph of scans each centred on its own centroid (``centres``, by scan),
-    in the scans' own coordinates. Node ``m`` is scan ``scans[m]``, and its pose maps
-    into the first node's frame; an edge's information is about its target's points,
+def _graph_about(graph, centres: list[np.ndarray], scans: list[int], canon: list[int], frame: int):
+    """The optimised pose graph of scans in their canonical order, each centred on its
+    own centroid (``centres``), as the user gave them: nodes in the given order
+    (``canon``: the given index of each canonical scan), poses into scan ``frame``'s
+    frame (canonical), everything in the scans' own coordinates. Node ``m`` of
+    ``graph`` is scan ``scans[m]``; an edge's information is about its target's points,
     as Open3D measures it."""
-    root = centres[scans[0]]
-    for m, node in enumerate(graph.nodes):
-        node.pose = from_centred(np.asarray(node.pose), root, centres[scans[m]])
+    given = sorted(scans, key=lambda c: canon[c])
+    node_of = {c: m for m, c in enumerate(given)}
+    pose_of = {c: np.asarray(graph.nodes[m].pose) for m, c in enumerate(scans)}
+    into_frame = np.linalg.inv(pose_of[frame])
+    out = reg.PoseGraph()
+    for c in given:
+        out.nodes.append(
+            reg.PoseGraphNode(from_centred(into_frame @ pose_of[c], centres[frame], centres[c]))
+        )
     for edge in graph.edges:
         i, j = scans[edge.target_node_id], scans[edge.source_node_id]
-        edge.transformation = from_centred(np.asarray(edge.transformation), centres[i], centres[j])
-        edge.information = information_about(np.asarray(edge.information), centres[i])
-    return graph
+        out.edges.append(
+            reg.PoseGraphEdge(
+                node_of[j],
+                node_of[i],
+                from_centred(np.asarray(edge.transformation), centres[i], centres[j]),
+                information_about(np.asarray(edge.information), centres[i]),
+                uncertain=edge.uncertain,
+                confidence=edge.confidence,
+            )
+        )
+    return out
 
 
 def _full_normals(points: np.ndarray, settings: RegistrationSettings) -> np.ndarray:
@@ -188,9 +205,27 @@ def _prepare_scan(k: int, *args) -> PreparedCloud:
         raise ValueError(f"scan {k}: {exc}") from exc
 
 
-def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
+def _canonical_order(points: list[np.ndarray]) -> list[int]:
+    """The scans ordered by their content, the same wherever the set lies: the point
+    count, then the spreads of the points (covariance eigenvalues to 6 digits), then a
+    hash of the coordinates, then (equal scans) the given index. The given index of
+    each."""
+
+    def key(k: int):
+        p = points[k]
+        spread = np.linalg.eigvalsh(np.cov(p.T)) if len(p) > 1 else np.zeros(3)
+        rounded = tuple(float(f"{v:.6g}") for v in spread)
+        return len(p), rounded, hashlib.sha256(np.ascontiguousarray(p).tobytes()).hexdigest(), k
+
+    return sorted(range(len(points)), key=key)
+
+
+def _candidates(
+    features: list[np.ndarray], k: int, sequence: list[int] | None = None
+) -> list[tuple[int, int]]:
     """All pairs of a few scans; for many, each scan's ``k`` nearest by its pooled
-    (mean, unit-length) descriptor, plus its neighbours in the given order."""
+    (mean, unit-length) descriptor, plus its neighbours in ``sequence`` (the scans in
+    the order they were given, which may follow an acquisition; default: as indexed)."""
     n = len(features)
     if n <= ALL_PAIRS_UP_TO:
         return [(i, j) for i in range(n) for j in range(i + 1, n)]
@@ -198,7 +233,8 @@ def _candidates(features: list[np.ndarray], k: int) -> list[tuple[int, int]]:
     pooled /= np.linalg.norm(pooled, axis=1, keepdims=True) + 1e-12
     distance = np.linalg.norm(pooled[:, None] - pooled[None], axis=2)
     np.fill_diagonal(distance, np.inf)
-    pairs = {(i, i + 1) for i in range(n - 1)}
+    sequence = list(range(n)) if sequence is None else sequence
+    pairs = {(min(a, b), max(a, b)) for a, b in zip(sequence, sequence[1:], strict=False)}
     for i in range(n):
         for j in np.argsort(distance[i], kind="stable")[:k]:
             pairs.add((min(i, int(j)), max(i, int(j))))
@@ -294,6 +330,13 @@ def register_multiway(
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     views = as_viewpoints(viewpoints, len(points))
+    n = len(points)
+    # The scans in a canonical order, by content: the same files in any order give the
+    # same pairs, in the same directions, and the same poses. canon[c]: the given
+    # index of the scan at canonical place c.
+    canon = _canonical_order(points)
+    points = [points[k] for k in canon]
+    views = [views[k] for k in canon]
     # Every scan in its own frame centred on its centroid, for the whole run: edges,
     # information matrices and the optimisation stay well conditioned at survey
     # coordinates, and a scan set gives the same edges and poses wherever each of its
@@ -314,8 +357,8 @@ def register_multiway(
         prepared = parallel_map(
             _prepare_scan,
             [
-                (k, p, voxel, worker, view, settings.normal_radius, settings)
-                for k, (p, view) in enumerate(zip(points, views, strict=True))
+                (canon[c], p, voxel, worker, view, settings.normal_radius, settings)
+                for c, (p, view) in enumerate(zip(points, views, strict=True))
             ],
             n_jobs=n_jobs,
             progress=progress,
@@ -329,11 +372,13 @@ def register_multiway(
         n_points = resolve_global_points(n_global_points, worker)
         setter = int(np.argmax([common_voxel([p], n_points) for p in points]))
         raise ValueError(
-            f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan {setter} "
-            f"({len(points[setter])} points) needs: too small a scan coarsens them all)"
+            f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan "
+            f"{canon[setter]} ({len(points[setter])} points) needs: too small a scan "
+            "coarsens them all)"
         ) from exc
     features = [p.features for p in prepared]
-    candidates = _candidates(features, RETRIEVED_NEIGHBOURS)
+    place = {k: c for c, k in enumerate(canon)}
+    candidates = _candidates(features, RETRIEVED_NEIGHBOURS, [place[k] for k in range(n)])
     log.info(
         "%d scans prepared at resolution %.4g; screening %d candidate pairs with %s",
         len(points),
@@ -360,10 +405,12 @@ def register_multiway(
     }
     log.info("%d of %d pairs fit (edge fitness >= %.2f)", len(edges), len(candidates), min_fitness)
     for (i, j), (_, fitness, _) in zip(candidates, results, strict=True):
-        log.debug("pair %d-%d: edge fitness %.3f", i, j, fitness)
-    tree = spanning_tree(edges, len(points))
-    poses = poses_from_tree(tree, edges, len(points))
-    graph, poses, kept = optimise(edges, tree, poses, settings)
+        log.debug("pair %d-%d: edge fitness %.3f", canon[i], canon[j], fitness)
+    # Rooted in the largest part the edges join, not in whichever scan came first.
+    (root, *_), every_part = largest_part(edges, n)
+    tree = spanning_tree(edges, n)
+    poses = poses_from_tree(tree, edges, n, root)
+    graph, poses, kept = optimise(edges, tree, poses, settings, root)
     # Final refinement: every kept edge again by ICP from the optimised poses (each
     # keeps the fitness that made it an edge), ending on the full scans.
     normals = {i: _full_normals(points[i], settings) for i in sorted({i for i, _ in kept})}
@@ -393,28 +440,30 @@ def register_multiway(
     }
     if refined:
         tree = [e for e in tree if e in refined]
-        graph, poses, kept = optimise(refined, tree, poses, settings)
-    unconnected = [k for k, p in enumerate(poses) if p is None]
-    log.info(
-        "pose graph: %d edges kept, %d of %d scans placed",
-        len(kept),
-        len(points) - len(unconnected),
-        len(points),
-    )
-    placed = [k for k, p in enumerate(poses) if p is not None]  # the graph's nodes
-    poses = [
-        None if p is None else from_centred(p, centres[0], c)
-        for p, c in zip(poses, centres, strict=True)
-    ]
-    pairs = {
-        (i, j): (from_centred(t, centres[i], centres[j]), f) for (i, j), (t, f) in pairs.items()
-    }
+        graph, poses, kept = optimise(refined, tree, poses, settings, root)
+    placed = [c for c, p in enumerate(poses) if p is not None]  # the graph's nodes
+    log.info("pose graph: %d edges kept, %d of %d scans placed", len(kept), len(placed), n)
+    # Back in the given order and coordinates, in the frame of the placed scan given
+    # first (scan 0 whenever it is placed).
+    frame = min(placed, key=lambda c: canon[c])
+    into_frame = np.linalg.inv(poses[frame])
+    given_poses: list = [None] * n
+    for c in placed:
+        given_poses[canon[c]] = from_centred(into_frame @ poses[c], centres[frame], centres[c])
+    given_poses[canon[frame]] = np.eye(4)  # exactly, not to rounding
+    given_pairs = {}
+    for (i, j), (t, f) in pairs.items():
+        moved = from_centred(t, centres[i], centres[j])  # scan j into scan i
+        a, b = canon[i], canon[j]
+        given_pairs[(a, b) if a < b else (b, a)] = (moved if a < b else np.linalg.inv(moved), f)
     return MultiwayResult(
-        poses=poses,
-        pose_graph=_graph_about(graph, centres, placed),
-        pairs=pairs,
-        edges=kept,
-        unconnected=unconnected,
+        poses=given_poses,
+        pose_graph=_graph_about(graph, centres, placed, canon, frame),
+        pairs=dict(sorted(given_pairs.items())),
+        edges=sorted((min(canon[i], canon[j]), max(canon[i], canon[j])) for i, j in kept),
+        unconnected=sorted(canon[c] for c in range(n) if poses[c] is None),
         voxel_size=voxel,
         seconds=time.perf_counter() - start,
+        frame=canon[frame],
+        parts=[sorted(canon[c] for c in part) for part in every_part],
     )

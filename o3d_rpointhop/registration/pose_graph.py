@@ -9,7 +9,14 @@ import open3d as o3d
 
 from .settings import RegistrationSettings
 
-__all__ = ["optimise", "optimise_pose_graph", "poses_from_tree", "spanning_tree"]
+__all__ = [
+    "largest_part",
+    "optimise",
+    "optimise_pose_graph",
+    "parts",
+    "poses_from_tree",
+    "spanning_tree",
+]
 
 reg = o3d.pipelines.registration
 
@@ -33,10 +40,42 @@ def spanning_tree(edges: dict, n: int) -> list[tuple[int, int]]:
     return [pair for pair, _ in ordered if (min(pair), max(pair)) in kept]
 
 
-def poses_from_tree(tree, edges, n: int) -> list:
-    """Poses (scan -> scan 0) along the tree; None where scan 0 cannot be reached."""
+def parts(edges: dict, n: int) -> list[list[int]]:
+    """The connected parts of ``n`` scans joined by ``edges`` (``(i, j) -> (.., fitness,
+    ..)``), each sorted, every scan in one (alone if no edge joins it)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rows = [i for i, _ in edges]
+    cols = [j for _, j in edges]
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    found: dict[int, list[int]] = {}
+    for k, label in enumerate(labels):
+        found.setdefault(int(label), []).append(k)
+    return list(found.values())
+
+
+def largest_part(edges: dict, n: int) -> tuple[list[int], list[list[int]]]:
+    """The part of the scan set the reconstruction is rooted in, and every part, that
+    one first, the others from the largest down: the most scans, then the most total
+    edge fitness, then the lowest scan (the scans' order is a canonical one, by
+    content, so no position decides)."""
+
+    def rank(part: list[int]):
+        inside = set(part)
+        support = sum(e[1] for (i, j), e in edges.items() if i in inside and j in inside)
+        return (-len(part), -support, part[0])
+
+    ranked = sorted(parts(edges, n), key=rank)
+    return ranked[0], ranked
+
+
+def poses_from_tree(tree, edges, n: int, root: int = 0) -> list:
+    """Poses (scan -> scan ``root``) along the tree; None where ``root`` cannot be
+    reached."""
     poses: list = [None] * n
-    poses[0] = np.eye(4)
+    poses[root] = np.eye(4)
     changed = True
     while changed:
         changed = False
@@ -64,9 +103,10 @@ def optimise_pose_graph(graph, option) -> None:
         )
 
 
-def optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettings):
-    """Open3D's global optimisation over the connected scans; returns the graph, the
-    optimised poses (None for unconnected scans) and the edges it kept."""
+def optimise(edges: dict, tree: list, poses: list, settings: RegistrationSettings, root: int = 0):
+    """Open3D's global optimisation over the scans with a pose (``root`` held fixed);
+    returns the graph, the optimised poses (into ``root``'s frame; None for the scans
+    without a pose) and the edges it kept."""
     nodes = [k for k, p in enumerate(poses) if p is not None]
     index = {k: m for m, k in enumerate(nodes)}
     graph = reg.PoseGraph()
@@ -90,15 +130,15 @@ def optimise(edges: dict, tree: list, poses: list, settings: RegistrationSetting
             max_correspondence_distance=settings.edge_distance,
             edge_prune_threshold=0.25,
             preference_loop_closure=1.0,
-            reference_node=0,
+            reference_node=index[root],
         ),
     )
     optimised: list = [None] * len(poses)
-    # Relative to scan 0's optimised pose, so that scan 0 is exactly the identity.
-    reference = np.linalg.inv(np.array(graph.nodes[index[0]].pose))
+    # Relative to the root's optimised pose, so that the root is exactly the identity.
+    reference = np.linalg.inv(np.array(graph.nodes[index[root]].pose))
     for k in nodes:
         optimised[k] = reference @ np.array(graph.nodes[index[k]].pose)
-    optimised[0] = np.eye(4)
+    optimised[root] = np.eye(4)
     # Open3D removes the edges its line process pruned; what remains was kept.
     remaining = {(nodes[e.target_node_id], nodes[e.source_node_id]) for e in graph.edges}
     kept = [e for e in listed if e in remaining]

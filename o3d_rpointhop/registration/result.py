@@ -383,20 +383,27 @@ class MultiwayResult:
     Attributes
     ----------
     poses : list of (ndarray of shape (4, 4) or None)
-        ``poses[k]`` maps scan ``k`` into scan 0's frame; ``None`` for an unconnected
-        scan.
+        ``poses[k]`` maps scan ``k`` into scan ``frame``'s frame; ``None`` for a scan
+        outside the placed part.
     pose_graph : open3d.pipelines.registration.PoseGraph
-        The optimised graph (nodes: connected scans in order; edges: kept pairs).
+        The optimised graph (nodes: the placed scans in order; edges: kept pairs).
     pairs : dict
         ``(i, j) -> (transformation, fitness)`` for every candidate pair registered
         (the transformation maps scan ``j`` into scan ``i``).
     edges : list of tuple
         The pairs kept after optimisation, ``(i, j)``.
     unconnected : list of int
-        Scans no kept edge joins to scan 0 (left out, never placed silently).
+        Scans outside the placed part (left out, never placed silently).
     voxel_size : float
         The common resolution.
     seconds : float
+    frame : int
+        The scan whose frame the poses are in: scan 0 when it is placed, else the
+        placed scan given first.
+    parts : list of list of int
+        The parts the screened pairs join the scans into, each its scans in order: the
+        placed one first (the most scans, then the most total edge fitness), then the
+        others from the largest down (a scan no pair joins is a part of its own).
     """
 
     poses: list
@@ -406,6 +413,8 @@ class MultiwayResult:
     unconnected: list = field(default_factory=list)
     voxel_size: float = 0.0
     seconds: float = 0.0
+    frame: int = 0
+    parts: list = field(default_factory=list)
 
     def merge(
         self,
@@ -414,7 +423,7 @@ class MultiwayResult:
         voxel_size: float | str | None = "auto",
         colour: bool = True,
     ) -> o3d.geometry.PointCloud:
-        """The placed scans in scan 0's frame as one cloud.
+        """The placed scans in scan ``frame``'s frame as one cloud.
 
         Parameters
         ----------
@@ -513,6 +522,8 @@ class MultiwayResult:
             "unconnected": list(self.unconnected),
             "voxel_size": self.voxel_size,
             "seconds": self.seconds,
+            "frame": self.frame,
+            "parts": [list(part) for part in self.parts],
             "pose_graph": {
                 "nodes": [np.asarray(n.pose) for n in graph.nodes],
                 "edges": [
@@ -559,6 +570,8 @@ class MultiwayResult:
                 unconnected=[int(k) for k in body["unconnected"]],
                 voxel_size=float(body["voxel_size"]),
                 seconds=float(body["seconds"]),
+                frame=int(body.get("frame", 0)),
+                parts=[[int(k) for k in part] for part in body.get("parts", [])],
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
@@ -571,6 +584,8 @@ class MultiwayResult:
             "scans": list(names),
             "poses": [None if p is None else p.tolist() for p in self.poses],
             "unconnected": [names[k] for k in self.unconnected],
+            "frame": names[self.frame],
+            "parts": [[names[k] for k in part] for part in self.parts],
             "edges": [[names[i], names[j]] for i, j in self.edges],
             "voxel_size": self.voxel_size,
             "seconds": self.seconds,

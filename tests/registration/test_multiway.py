@@ -260,3 +260,38 @@ def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
     assert result.unconnected == []
     for k in range(1, 5):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
+
+
+def test_the_same_scans_in_any_order_give_the_same_room():
+    """Shuffled and reversed, the same scans give the same placed set, edges and
+    relative poses (each pair is registered in a direction set by the scans' content,
+    not by their positions); poses are in the frame of the scan given first."""
+    scans, truth = partial_views(4, seed=5)
+    base = register_multiway(scans, seed=0)
+    for order in ([3, 2, 1, 0], [2, 0, 3, 1]):
+        other = register_multiway([scans[k] for k in order], seed=0)
+        assert other.frame == 0 and other.unconnected == []
+        back = {(order[i], order[j]) for i, j in other.edges}
+        assert {(min(e), max(e)) for e in back} == set(base.edges)
+        for a in range(4):
+            for b in range(4):
+                # scan order[b] relative to scan order[a], in both results
+                mine = np.linalg.inv(other.poses[a]) @ other.poses[b]
+                theirs = np.linalg.inv(base.poses[order[a]]) @ base.poses[order[b]]
+                np.testing.assert_allclose(mine, theirs, atol=1e-9)
+
+
+def test_a_room_is_rooted_in_its_largest_part_not_in_scan_0():
+    """Scan 0 overlaps nothing: the other scans are still placed, in the frame of the
+    first of them, and the result says which parts the scans fell into (before, every
+    scan but scan 0 was left out)."""
+    scans, truth = partial_views(4, seed=5)
+    stranger = make_object(2000, shape_seed=30, sample_seed=1) + 40.0
+    result = register_multiway([stranger, *scans], seed=0)
+    assert result.unconnected == [0] and result.frame == 1
+    assert result.parts == [[1, 2, 3, 4], [0]]
+    np.testing.assert_array_equal(result.poses[1], np.eye(4))
+    for k in range(2, 5):
+        assert rotation_error_deg(result.poses[k], truth[k - 1]) < 2.0
+    summary = result.as_dict(["s", "a", "b", "c", "d"])
+    assert summary["frame"] == "a" and summary["parts"] == [["a", "b", "c", "d"], ["s"]]
