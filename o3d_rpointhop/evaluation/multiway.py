@@ -157,17 +157,20 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
                 descriptor = FPFHTransformer() if method == "fpfh" else None
                 result = register_multiway(moved, descriptor, seed=seed, n_jobs=n_jobs)
             rows = []
+            # The truth in the frame the result's poses are in (scan 0's unless unplaced).
+            into = np.linalg.inv(truth[getattr(result, "frame", 0)])
             for k, n in enumerate(names):
                 pose = result.poses[k]
                 if pose is None:
                     rows.append(ScanRecord(n, placed=False))
                     continue
-                gap = apply_transform(moved[k], pose) - apply_transform(moved[k], truth[k])
+                want = into @ truth[k]
+                gap = apply_transform(moved[k], pose) - apply_transform(moved[k], want)
                 rows.append(
                     ScanRecord(
                         n,
                         placed=True,
-                        rotation_error_deg=rotation_error_deg(pose, truth[k]),
+                        rotation_error_deg=rotation_error_deg(pose, want),
                         mean_point_error=float(np.linalg.norm(gap, axis=1).mean()),
                     )
                 )
