@@ -58,6 +58,11 @@ _TAG_MASK = (1 << _TAG_SHIFT) - 1
 
 # Veltkamp's splitter: c - (c - x) with c = x * (2**37 + 1) is x rounded to 16 bits.
 _SPLITTER = 2.0**37 + 1.0
+# Above this the splitter's product overflows (squared distances of coordinates up to
+# 1e154, which the input checks accept): such values are split scaled by 2**-128, exactly.
+_SPLIT_MAX = 2.0**980
+_SPLIT_DOWN = 2.0**-128
+_SPLIT_UP = 2.0**128
 # Keys round the squared distance times this irrational factor: the rounding's
 # midpoints, where the last bit decides, then miss the exact dyadic values that
 # squared distances take on clouds stored in float32 or on a power-of-two grid.
@@ -75,6 +80,10 @@ def tie_key(sq):  # pragma: no cover - compiled
     and their order is decided by the points' ranks (:func:`tie_ranks`), which move
     with the cloud, instead of by that rounding. Keys are ordered as the distances."""
     stretched = sq * _STRETCH
+    if stretched > _SPLIT_MAX:  # the splitter would overflow: round a power-of-two share
+        stretched *= _SPLIT_DOWN
+        c = stretched * _SPLITTER
+        return (c - (c - stretched)) * _SPLIT_UP
     c = stretched * _SPLITTER
     return c - (c - stretched)
 

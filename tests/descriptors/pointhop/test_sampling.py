@@ -184,6 +184,20 @@ def test_hop_neighbours_leave_the_query_out_and_serve_every_level():
         HopSearch(pts).neighbours(None, 300)
 
 
+def test_hop_neighbours_do_not_change_with_a_power_of_two_scale_up_to_the_largest():
+    """Scaled by 2**495 (squared distances near 1e298, coordinates the input checks
+    accept), the ties are rounded as at scale 1, without overflow: the same neighbours
+    and samples (overflowing keys were NaN, and the lists came out wrong)."""
+    pts = np.round(make_blob(300, shape_seed=10) * 64) / 64  # on a grid: many ties
+    pts = np.ascontiguousarray(pts[spatial_order(pts)])
+    big = pts * 2.0**495
+    for k in (5, 12):
+        np.testing.assert_array_equal(
+            HopSearch(big).neighbours(None, k)[0], HopSearch(pts).neighbours(None, k)[0]
+        )
+    np.testing.assert_array_equal(fps_subsets(big, [120])[0], fps_subsets(pts, [120])[0])
+
+
 def test_hop_neighbours_among_a_sample_by_position():
     """Sources are a sample: neighbours are positions in it; a query in the sample
     leaves itself out, a query outside leaves out one source it coincides with."""
