@@ -33,7 +33,8 @@ def add_parser(commands) -> None:
     p = commands.add_parser(
         "reconstruct",
         help="rebuild an object or scene from unposed scans (multiway registration)",
-        description="Register every scan to scan 0 through a pose graph and write the "
+        description="Register the scans to one another through a pose graph (in scan 0's "
+        "frame, or the first placed scan's when scan 0 overlaps none) and write the "
         "merged cloud: every point of every placed scan with its colours and normals "
         "(grey for scans without colours beside scans with them; from LAS / LAZ scans to a "
         "LAS / LAZ output, every point dimension: intensity, classification, GPS time, ...), "
@@ -49,7 +50,11 @@ def add_parser(commands) -> None:
         "glob patterns (also in natural order); -v prints the order",
     )
     p.add_argument("-o", "--output", required=True, help="merged cloud to write (.ply, ...)")
-    p.add_argument("--poses", help="write the poses (scan -> scan 0), edges and flags as JSON")
+    p.add_argument(
+        "--poses",
+        help="write the poses (scan -> the frame's scan, scan 0 when placed), edges, "
+        "parts and flags as JSON",
+    )
     p.add_argument("--mesh", help="also write an Open3D Poisson surface mesh here")
     p.add_argument(
         "--pose-graph",
@@ -58,7 +63,7 @@ def add_parser(commands) -> None:
     p.add_argument(
         "--trajectory",
         action="append",
-        help="write the scans' poses (scan -> scan 0) as a trajectory (repeatable, one "
+        help="write the scans' poses (scan -> the frame's scan) as a trajectory (repeatable, one "
         "file per format): KITTI keeps line k for scan k (12 nan for an unplaced scan); "
         "TUM (timestamp k, the run recorded in a comment) and 3dmatch (record 0 k n) name "
         "each scan and leave unplaced ones out",
@@ -224,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(named) from exc
     merged = result.merge(scans, voxel_size=args.output_voxel_size, colour=args.colour_by_scan)
     check_size(args.output, cloud_bytes(merged), args.force, "downsample with --output-voxel-size")
-    # In scan 0's frame: a LAS/LAZ output keeps scan 0's grid (offsets, scales), and,
+    # A LAS/LAZ output keeps scan 0's grid (offsets, scales), and,
     # when every point is kept and every scan is LAS / LAZ, every dimension of each.
     placed = [p for p, pose in zip(args.scans, result.poses, strict=True) if pose is not None]
     las = all(Path(p).suffix.lower() in (".las", ".laz") for p in placed)

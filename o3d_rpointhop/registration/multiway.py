@@ -12,8 +12,10 @@ edges of an Open3D ``PoseGraph``: a maximum spanning tree of the best edges give
 starting poses and is kept as certain, every other edge is a loop closure that Open3D's
 Levenberg-Marquardt optimisation may prune (line process; :mod:`.pose_graph`). The
 optimised poses are refined once more (every kept edge re-registered by
-``register()``'s ICP from them, ending on the full scans, then optimised again). Scans
-that no kept edge joins to scan 0 are reported as unconnected and get no pose.
+``register()``'s ICP from them, ending on the full scans, then optimised again). The
+scans are worked on in a canonical order by content, so their given order changes
+nothing; the graph is rooted in the largest part its edges join, and scans outside it
+are reported as unconnected and get no pose.
 """
 
 from __future__ import annotations
@@ -155,22 +157,18 @@ def information_about(information: np.ndarray, origin: np.ndarray) -> np.ndarray
     return change.T @ information @ change
 
 
-def _graph_about(graph, centres: list[np.ndarray], scans: list[int], canon: list[int], frame: int):
+def _graph_about(graph, centres: list[np.ndarray], scans: list[int], canon: list[int], poses):
     """The optimised pose graph of scans in their canonical order, each centred on its
     own centroid (``centres``), as the user gave them: nodes in the given order
-    (``canon``: the given index of each canonical scan), poses into scan ``frame``'s
-    frame (canonical), everything in the scans' own coordinates. Node ``m`` of
-    ``graph`` is scan ``scans[m]``; an edge's information is about its target's points,
-    as Open3D measures it."""
+    (``canon``: the given index of each canonical scan) with the result's ``poses`` (by
+    given index), edges in the scans' own coordinates. Node ``m`` of ``graph`` is scan
+    ``scans[m]``; an edge's information is about its target's points, as Open3D
+    measures it."""
     given = sorted(scans, key=lambda c: canon[c])
     node_of = {c: m for m, c in enumerate(given)}
-    pose_of = {c: np.asarray(graph.nodes[m].pose) for m, c in enumerate(scans)}
-    into_frame = np.linalg.inv(pose_of[frame])
     out = reg.PoseGraph()
     for c in given:
-        out.nodes.append(
-            reg.PoseGraphNode(from_centred(into_frame @ pose_of[c], centres[frame], centres[c]))
-        )
+        out.nodes.append(reg.PoseGraphNode(poses[canon[c]]))
     for edge in graph.edges:
         i, j = scans[edge.target_node_id], scans[edge.source_node_id]
         out.edges.append(
@@ -271,7 +269,8 @@ def register_multiway(
     seed: int = 0,
     settings: RegistrationSettings | None = None,
 ) -> MultiwayResult:
-    """Poses of unposed scans of one object or scene, in scan 0's frame.
+    """Poses of unposed scans of one object or scene, in scan 0's frame (or, when scan 0
+    overlaps no placed scan, the frame of the placed scan given first).
 
     Parameters
     ----------
@@ -458,7 +457,7 @@ def register_multiway(
         given_pairs[(a, b) if a < b else (b, a)] = (moved if a < b else np.linalg.inv(moved), f)
     return MultiwayResult(
         poses=given_poses,
-        pose_graph=_graph_about(graph, centres, placed, canon, frame),
+        pose_graph=_graph_about(graph, centres, placed, canon, given_poses),
         pairs=dict(sorted(given_pairs.items())),
         edges=sorted((min(canon[i], canon[j]), max(canon[i], canon[j])) for i, j in kept),
         unconnected=sorted(canon[c] for c in range(n) if poses[c] is None),

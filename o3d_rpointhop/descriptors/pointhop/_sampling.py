@@ -258,7 +258,11 @@ def priorities(points: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def poisson_disk_subset(
-    points: np.ndarray, m: int, lists: np.ndarray | None = None, n_threads: int = 1
+    points: np.ndarray,
+    m: int,
+    lists: np.ndarray | None = None,
+    n_threads: int = 1,
+    ranks: np.ndarray | None = None,
 ) -> np.ndarray:
     """Sorted indices of an ``m``-point Poisson-disk subsample of ``points``.
 
@@ -273,6 +277,8 @@ def poisson_disk_subset(
         competitors from them instead of searching again (the same competitors).
     n_threads : int, default=1
         Threads of the searches (the sample does not depend on it).
+    ranks : ndarray of int64, default=None
+        The points' :func:`~._neighbors.tie_ranks`, if known (computed otherwise).
 
     Returns
     -------
@@ -286,7 +292,7 @@ def poisson_disk_subset(
         # Each round keeps at least the local maxima, ~1/(k+1); several rounds for tiny m.
         step = max(m, int(np.ceil(len(current) / (_COMPETITORS + 1))))
         first = lists if len(current) == n else None
-        current = current[_thin(points[current], step, first, n_threads)]
+        current = current[_thin(points[current], step, first, n_threads, ranks)]
     return current
 
 
@@ -321,11 +327,16 @@ def _nearest_of_lists(
 
 
 def _thin(
-    points: np.ndarray, m: int, lists: np.ndarray | None = None, n_threads: int = 1
+    points: np.ndarray,
+    m: int,
+    lists: np.ndarray | None = None,
+    n_threads: int = 1,
+    ranks: np.ndarray | None = None,
 ) -> np.ndarray:
     """One hard-core thinning of ``points`` down to (at most) ``m`` of them; each point's
     competitors are its ``k`` nearest, taken from ``lists`` (see
-    :func:`poisson_disk_subset`) or searched."""
+    :func:`poisson_disk_subset`; ``ranks``: the whole cloud's, which the lists come
+    with) or searched."""
     n = len(points)
     if m >= n:
         return np.arange(n, dtype=np.int64)
@@ -335,8 +346,9 @@ def _thin(
     if lists is not None and lists.shape[1] >= k:
         idx = np.empty((n, k), np.int64)
         sq = np.empty((n, k))
-        ranks = tie_ranks(points)
-        rows = np.argsort(ranks)
+        ranks = tie_ranks(points) if ranks is None else ranks
+        rows = np.empty_like(ranks)  # the row of each rank: the inverse permutation
+        rows[ranks] = np.arange(n)
         run_blocks(_nearest_of_lists, n, n_threads, points, lists, ranks, rows, idx, sq)
     else:
         # The point itself left out.
@@ -391,6 +403,7 @@ def hop_subsets(
             raise ValueError(f"cannot sample {m} of {len(current)} points")
         if m < len(current):
             lists = graph[0] if graph is not None and len(current) == len(points) else None
-            current = current[poisson_disk_subset(points[current], m, lists, n_threads)]
+            whole = ranks if len(current) == len(points) else None
+            current = current[poisson_disk_subset(points[current], m, lists, n_threads, whole)]
         out.append(current)
     return out
