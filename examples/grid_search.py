@@ -12,6 +12,7 @@ from sklearn.model_selection import GridSearchCV
 
 from o3d_rpointhop import (
     FPFHTransformer,
+    Matcher,
     PointToPlaneICP,
     RANSACGlobal,
     RegistrationPipeline,
@@ -29,12 +30,12 @@ for k in range(4):
     y.append(np.linalg.inv(motion))  # maps the source back onto the target
 
 pipe = RegistrationPipeline(
-    [("global", RANSACGlobal()), ("icp", PointToPlaneICP())],
+    [("global", RANSACGlobal(matcher=Matcher())), ("icp", PointToPlaneICP())],
     descriptor=FPFHTransformer(normal_radius="auto"),
 )
 # The histogram radius: "auto" is five point spacings; 0.02 is far below one spacing
 # (about 0.06 here), so FPFH sees no neighbours and no pair can register with it.
-grid = {"descriptor__radius": ["auto", 0.02], "global__mutual_filter": [False, True]}
+grid = {"descriptor__radius": ["auto", 0.02], "global__matcher__mutual_filter": [False, True]}
 search = GridSearchCV(pipe, grid, scoring=registration_scorer(), cv=2).fit(X, y)
 
 print("recall (5 deg, two resolutions) per setting, mean over 2 folds of 2 pairs:")
@@ -43,6 +44,6 @@ for params, score in zip(
 ):
     print(
         f"  radius={params['descriptor__radius']!s:5}  "
-        f"mutual_filter={params['global__mutual_filter']!s:5}  recall={score:.2f}"
+        f"mutual_filter={params['global__matcher__mutual_filter']!s:5}  recall={score:.2f}"
     )
 print("best:", search.best_params_)

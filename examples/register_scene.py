@@ -44,7 +44,11 @@ fpfh = FPFHTransformer()
 print(f"{name}: {len(source)} and {len(target)} points")
 fpfh_options = dict(global_method="consensus", n_global_points=4096)
 both = DescriptorUnion([("rpointhop", scene), ("fpfh", fpfh)], transformer_weights={"fpfh": 0.7})
-low_overlap = dict(global_method=ConsensusGlobal(frame_turns=4))
+low_overlap = dict(
+    global_method=ConsensusGlobal(
+        matcher=ConsensusGlobal.default_matcher().set_params(frame_turns=4)
+    )
+)
 for label, result in (
     ("R-PointHop scene model", register(source, target, scene, viewpoints=viewpoints)),
     ("FPFH + consensus", register(source, target, fpfh, viewpoints=viewpoints, **fpfh_options)),

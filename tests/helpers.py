@@ -235,3 +235,10 @@ def moved_part(rng, shape_seed: int, euler_zyx_deg, shift, n_points: int = 600, 
     truth[:3, :3] = Rotation.from_euler("zyx", euler_zyx_deg, degrees=True).as_matrix()
     truth[:3, 3] = shift
     return apply_transform(target[keep], np.linalg.inv(truth)), target, truth, keep
+
+
+def consensus_matcher(**params):
+    """The consensus's default matcher (both ways, at most 8000) with ``params`` changed."""
+    from o3d_rpointhop import ConsensusGlobal
+
+    return ConsensusGlobal.default_matcher().set_params(**params)

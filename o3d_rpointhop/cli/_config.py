@@ -52,7 +52,7 @@ DESCRIPTOR_KEYS: dict[str, Any] = {
     "fpfh_weight": None,
 }
 # Step parameters a file cannot give (objects, not values).
-_OBJECT_PARAMETERS = {"descriptor", "refine"}
+_OBJECT_PARAMETERS = {"descriptor", "refine", "matcher"}
 # Estimator parameters a file does not set (a progress bar is not a setting).
 _NOT_SETTINGS = {"progress"}
 
@@ -86,6 +86,8 @@ def default_config() -> dict[str, dict[str, Any]]:
     for name, cls in _steps().items():
         params = cls().get_params(deep=False)
         config[name] = {k: v for k, v in params.items() if k not in _OBJECT_PARAMETERS}
+        if "matcher" in params:  # [<step>.matcher]: the step's default matcher
+            config[f"{name}.matcher"] = cls.default_matcher().get_params()
     config["settings"] = _settings_section()
     config["multiway"] = {"min_fitness": MIN_EDGE_FITNESS}
     config["descriptor"] = dict(DESCRIPTOR_KEYS)
@@ -123,12 +125,18 @@ def load_config(path: str | None, sets: list[str] | None = None) -> dict[str, di
             if not isinstance(values, dict):
                 raise CommandError(f"{path}: {section!r} must be a [section], not a value")
             for key, value in values.items():
-                _merge(config, defaults, section, key, value, path)
+                if isinstance(value, dict):  # [step.matcher]
+                    for inner, item in value.items():
+                        _merge(config, defaults, f"{section}.{key}", inner, item, path)
+                else:
+                    _merge(config, defaults, section, key, value, path)
     for item in sets or []:
         name, sep, text = item.partition("=")
-        section, dot, key = name.strip().partition(".")
+        section, dot, key = name.strip().rpartition(".")
         if not (sep and dot and key):
-            raise UsageError(f"--set {item!r}: expected section.parameter=value")
+            raise UsageError(
+                f"--set {item!r}: expected section.parameter=value (or step.matcher.parameter)"
+            )
         try:  # a TOML value (numbers, true/false, quoted strings, arrays) or a bare word
             value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:
@@ -194,7 +202,10 @@ def registration_options(
     global_method = register["global_method"]
     try:
         chain = build_chain(
-            None if global_method == "none" else global_method, names, descriptor, config
+            None if global_method == "none" else global_method,
+            names,
+            descriptor,
+            _with_matchers(config),
         )
     except (ValueError, TypeError) as exc:
         raise UsageError(f"[register]: {exc}") from None
@@ -223,13 +234,25 @@ def registration_options(
     }
 
 
+def _with_matchers(config: dict[str, dict]) -> dict[str, dict]:
+    """``config`` with each ``[<step>.matcher]`` section made the step's ``matcher``
+    parameter: its default matcher with the section's values."""
+    built = {k: dict(v) for k, v in config.items()}
+    for name, step_class in _steps().items():
+        if f"{name}.matcher" in config:
+            matcher = step_class.default_matcher().set_params(**config[f"{name}.matcher"])
+            built.setdefault(name, {})["matcher"] = matcher
+    return built
+
+
 def _check_unused_steps(config: dict[str, dict], used: set[str]) -> None:
     """Check the values of the step sections a run does not use as well: a bad value in
     a config file is an error whichever step the run picks."""
+    built = _with_matchers(config)
     for name, step_class in _steps().items():
-        if name in config and name not in used:
+        if name in built and name not in used:
             try:
-                step_class(**config[name])._validate_all()
+                step_class(**built[name])._validate_all()
             except (ValueError, TypeError) as exc:
                 raise UsageError(f"[{name}] (not used by this run): {exc}") from None
 
@@ -294,6 +317,9 @@ def used_config(
     else:
         register["global_method"], config_params = _section_of(step)
         config[register["global_method"]] = config_params
+        if "matcher" in step.get_params(deep=False):
+            matcher = step.matcher if step.matcher is not None else step.default_matcher()
+            config[f"{register['global_method']}.matcher"] = matcher.get_params()
     if "refine" in options:
         chain = list(options["refine"] or [])
         register["symmetry_check"] = bool(chain) and isinstance(chain[-1], SymmetryCheck)

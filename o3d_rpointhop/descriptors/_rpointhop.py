@@ -365,8 +365,8 @@ class RPointHopTransformer(BaseDescriptor):
         first axis's sign is a matter of sampling): at true correspondences of 3DMatch
         training pairs the whole frame agrees within 25 degrees at 17 %, up to a half
         turn at 31 % and up to a quarter turn at 47 %. Matching a point's descriptor
-        against every turn of the other cloud's (``ConsensusGlobal(frame_turns=...)``,
-        ``RANSACGlobal(frame_turns=...)``) lets those correspondences match. The turns
+        against every turn of the other cloud's (``Matcher(frame_turns=...)``, the
+        matcher of a global step) lets those correspondences match. The turns
         reuse the frames and neighbours: each costs one more Saab projection (for a
         multi-hop model, one more last hop), not a description.
 

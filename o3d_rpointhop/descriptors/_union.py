@@ -223,7 +223,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
             raise TypeError(
                 "frame turns were asked for, but no part of the union has local frames "
                 "to turn (no transform_turns): add an RPointHopTransformer, or use "
-                "frame_turns=1"
+                "Matcher(frame_turns=1)"
             )
         answers = []
         for _, part, weight in parts:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -151,82 +152,22 @@ def _resolved(options: dict) -> dict:
     return chosen
 
 
-def ransac_3_hypotheses():
-    """RANSAC verifying its three best distinct hypotheses by overlap."""
-    return RANSACGlobal(n_hypotheses=3)
+def global_step(kind: str, n_hypotheses: int = 1, **matching) -> Callable[[], Any]:
+    """A factory of fresh global steps (one per pair) named by their public parameters:
+    ``kind`` (``"ransac"`` or ``"consensus"``), ``n_hypotheses`` and the
+    :class:`~o3d_rpointhop.registration.Matcher` parameters ``matching`` (over the
+    step's default matcher). Picklable, so runners can send it to workers."""
+    return partial(_built_step, kind, n_hypotheses, tuple(sorted(matching.items())))
 
 
-def consensus_3_hypotheses():
-    """The consensus verifying its three best distinct hypotheses by overlap."""
-    return ConsensusGlobal(n_hypotheses=3)
+def _built_step(kind: str, n_hypotheses: int, matching: tuple) -> Any:
+    step_class = {"ransac": RANSACGlobal, "consensus": ConsensusGlobal}[kind]
+    matcher = step_class.default_matcher().set_params(**dict(matching)) if matching else None
+    return step_class(matcher=matcher, n_hypotheses=n_hypotheses)
 
 
-def consensus_salient():
-    """The consensus on the matches between salient points (the 75 % most distinct of
-    each cloud)."""
-    return ConsensusGlobal(salient_share=0.75)
-
-
-def consensus_salient_2_nearest():
-    """The consensus on the matches between salient points, each point matched to its
-    two nearest descriptors of the other cloud."""
-    return ConsensusGlobal(salient_share=0.75, n_nearest=2)
-
-
-def consensus_salient_2_nearest_12000():
-    """:func:`consensus_salient_2_nearest` on up to 12000 matches."""
-    return ConsensusGlobal(salient_share=0.75, n_nearest=2, max_matches=12000)
-
-
-def consensus_salient_3_hypotheses():
-    """The consensus on the matches between salient points, verifying its three best
-    distinct hypotheses by overlap."""
-    return ConsensusGlobal(salient_share=0.75, n_hypotheses=3)
-
-
-def consensus_turns():
-    """The consensus on matches over every quarter turn of the local frames."""
-    return ConsensusGlobal(frame_turns=4)
-
-
-def consensus_half_turns():
-    """The consensus on matches over the local frames and their half turns."""
-    return ConsensusGlobal(frame_turns=2)
-
-
-def consensus_turns_salient():
-    """The consensus on matches over every quarter turn of the local frames, between
-    salient points (the 75 % most distinct of each cloud)."""
-    return ConsensusGlobal(frame_turns=4, salient_share=0.75)
-
-
-def consensus_turns_3_hypotheses():
-    """The consensus on matches over every quarter turn of the local frames, verifying
-    its three best distinct hypotheses by overlap."""
-    return ConsensusGlobal(frame_turns=4, n_hypotheses=3)
-
-
-def consensus_turns_salient_3_hypotheses():
-    """The consensus on matches over every quarter turn of the local frames between
-    salient points, verifying its three best distinct hypotheses by overlap."""
-    return ConsensusGlobal(frame_turns=4, salient_share=0.75, n_hypotheses=3)
-
-
-def consensus_cosine():
-    """The consensus on matches by the descriptors' cosine distance."""
-    return ConsensusGlobal(metric="cosine")
-
-
-def consensus_turns_cosine():
-    """The consensus on matches by cosine distance over every quarter turn of the
-    local frames."""
-    return ConsensusGlobal(metric="cosine", frame_turns=4)
-
-
-def consensus_turns_salient_cosine():
-    """The consensus on matches by cosine distance over every quarter turn of the
-    local frames, between salient points (the 75 % most distinct of each cloud)."""
-    return ConsensusGlobal(metric="cosine", frame_turns=4, salient_share=0.75)
+_SALIENT = {"salient_share": 0.75}
+_TURNS = {"frame_turns": 4}
 
 
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
@@ -332,11 +273,22 @@ METHODS = _methods(
         default_on=_SCENES,
         model="scene",
     ),
+    *(
+        Method(
+            f"rpointhop-scene-matches-{cap}",
+            f"R-PointHop, shipped scene model, consensus on at most {cap} matches (spread "
+            "by index) + point-to-plane ICP",
+            _register_with(global_method=global_step("consensus", max_matches=cap)),
+            datasets=_SCENES,
+            model="scene",
+        )
+        for cap in (2000, 4000)
+    ),
     Method(
         "rpointhop-scene-verified",
         "R-PointHop, shipped scene model, consensus with three hypotheses verified by "
         "overlap + point-to-plane ICP",
-        _register_with(global_method=consensus_3_hypotheses),
+        _register_with(global_method=global_step("consensus", 3)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -344,7 +296,7 @@ METHODS = _methods(
         "rpointhop-scene-salient",
         "R-PointHop, shipped scene model, consensus on matches between salient points "
         "(salient_share=0.75) + point-to-plane ICP",
-        _register_with(global_method=consensus_salient),
+        _register_with(global_method=global_step("consensus", **_SALIENT)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -353,7 +305,7 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on matches between salient points "
         "(salient_share=0.75) with three hypotheses verified by overlap + point-to-plane "
         "ICP",
-        _register_with(global_method=consensus_salient_3_hypotheses),
+        _register_with(global_method=global_step("consensus", 3, **_SALIENT)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -361,7 +313,7 @@ METHODS = _methods(
         "rpointhop-scene-salient-2nearest",
         "R-PointHop, shipped scene model, consensus on matches between salient points "
         "(salient_share=0.75), two nearest descriptors per point + point-to-plane ICP",
-        _register_with(global_method=consensus_salient_2_nearest),
+        _register_with(global_method=global_step("consensus", **_SALIENT, n_nearest=2)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -370,7 +322,9 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on up to 12000 matches between "
         "salient points (salient_share=0.75), two nearest descriptors per point + "
         "point-to-plane ICP",
-        _register_with(global_method=consensus_salient_2_nearest_12000),
+        _register_with(
+            global_method=global_step("consensus", **_SALIENT, n_nearest=2, max_matches=12000)
+        ),
         datasets=_SCENES,
         model="scene",
     ),
@@ -378,7 +332,7 @@ METHODS = _methods(
         "rpointhop-scene-salient-8192",
         "R-PointHop, shipped scene model, 8192 global points, consensus on matches between "
         "salient points (salient_share=0.75) + point-to-plane ICP",
-        _register_with(global_method=consensus_salient, n_global_points=8192),
+        _register_with(global_method=global_step("consensus", **_SALIENT), n_global_points=8192),
         datasets=_SCENES,
         model="scene",
     ),
@@ -386,7 +340,7 @@ METHODS = _methods(
         "rpointhop-scene-turns",
         "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
         "of the local frames (frame_turns=4) + point-to-plane ICP",
-        _register_with(global_method=consensus_turns),
+        _register_with(global_method=global_step("consensus", **_TURNS)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -404,7 +358,7 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, and FPFH side by side (DescriptorUnion, FPFH "
         "weighing 0.7), consensus on matches over every quarter turn of the local frames "
         "(frame_turns=4) + point-to-plane ICP",
-        _register_with(scene_with_fpfh, global_method=consensus_turns),
+        _register_with(scene_with_fpfh, global_method=global_step("consensus", **_TURNS)),
         datasets=_SCENES,
         model="scene",
         descriptor="union",
@@ -413,7 +367,7 @@ METHODS = _methods(
         "rpointhop-scene-half-turns",
         "R-PointHop, shipped scene model, consensus on matches over the local frames and "
         "their half turns (frame_turns=2) + point-to-plane ICP",
-        _register_with(global_method=consensus_half_turns),
+        _register_with(global_method=global_step("consensus", frame_turns=2)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -422,7 +376,7 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
         "of the local frames between salient points (frame_turns=4, salient_share=0.75) "
         "+ point-to-plane ICP",
-        _register_with(global_method=consensus_turns_salient),
+        _register_with(global_method=global_step("consensus", **_TURNS, **_SALIENT)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -431,7 +385,7 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
         "of the local frames with three hypotheses verified by overlap (frame_turns=4, "
         "n_hypotheses=3) + point-to-plane ICP",
-        _register_with(global_method=consensus_turns_3_hypotheses),
+        _register_with(global_method=global_step("consensus", 3, **_TURNS)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -440,7 +394,7 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on matches over every quarter turn "
         "of the local frames between salient points with three hypotheses verified by "
         "overlap (frame_turns=4, salient_share=0.75, n_hypotheses=3) + point-to-plane ICP",
-        _register_with(global_method=consensus_turns_salient_3_hypotheses),
+        _register_with(global_method=global_step("consensus", 3, **_TURNS, **_SALIENT)),
         datasets=_SCENES,
         model="scene",
     ),
@@ -448,7 +402,7 @@ METHODS = _methods(
         "rpointhop-scene-cosine",
         "R-PointHop, shipped scene model, consensus on matches by cosine distance "
         "(metric='cosine') + point-to-plane ICP",
-        _register_with(global_method=consensus_cosine),
+        _register_with(global_method=global_step("consensus", metric="cosine")),
         datasets=_SCENES,
         model="scene",
     ),
@@ -457,7 +411,7 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on matches by cosine distance over "
         "every quarter turn of the local frames (metric='cosine', frame_turns=4) + "
         "point-to-plane ICP",
-        _register_with(global_method=consensus_turns_cosine),
+        _register_with(global_method=global_step("consensus", **_TURNS, metric="cosine")),
         datasets=_SCENES,
         model="scene",
     ),
@@ -466,7 +420,9 @@ METHODS = _methods(
         "R-PointHop, shipped scene model, consensus on matches by cosine distance over "
         "every quarter turn of the local frames between salient points "
         "(metric='cosine', frame_turns=4, salient_share=0.75) + point-to-plane ICP",
-        _register_with(global_method=consensus_turns_salient_cosine),
+        _register_with(
+            global_method=global_step("consensus", **_TURNS, **_SALIENT, metric="cosine")
+        ),
         datasets=_SCENES,
         model="scene",
     ),
@@ -500,7 +456,7 @@ METHODS = _methods(
     Method(
         "rpointhop-ransac-icp-verified",
         "R-PointHop + RANSAC, three hypotheses verified by overlap + point-to-plane ICP",
-        _register_with(global_method=ransac_3_hypotheses),
+        _register_with(global_method=global_step("ransac", 3)),
         datasets=_OBJECTS,
     ),
     Method(
@@ -565,7 +521,7 @@ METHODS = _methods(
         "fpfh-pipeline-consensus-salient-icp",
         "FPFH through this library's consensus on matches between salient points "
         "(salient_share=0.75) + ICP",
-        _fpfh_pipeline(global_method=consensus_salient),
+        _fpfh_pipeline(global_method=global_step("consensus", **_SALIENT)),
         datasets=_SCENES,
         model=None,
         descriptor="fpfh",
@@ -574,7 +530,7 @@ METHODS = _methods(
         "fpfh-pipeline-consensus-salient-verified-icp",
         "FPFH through this library's consensus on matches between salient points "
         "(salient_share=0.75) with three hypotheses verified by overlap + ICP",
-        _fpfh_pipeline(global_method=consensus_salient_3_hypotheses),
+        _fpfh_pipeline(global_method=global_step("consensus", 3, **_SALIENT)),
         datasets=_SCENES,
         model=None,
         descriptor="fpfh",
@@ -583,7 +539,7 @@ METHODS = _methods(
         "fpfh-pipeline-consensus-cosine-icp",
         "FPFH through this library's consensus on matches by cosine distance "
         "(metric='cosine') + ICP",
-        _fpfh_pipeline(global_method=consensus_cosine),
+        _fpfh_pipeline(global_method=global_step("consensus", metric="cosine")),
         datasets=_SCENES,
         model=None,
         descriptor="fpfh",
@@ -592,7 +548,9 @@ METHODS = _methods(
         "fpfh-pipeline-consensus-cosine-icp-4096",
         "FPFH through this library's consensus on matches by cosine distance "
         "(metric='cosine') + ICP, 4096 global points",
-        _fpfh_pipeline(global_method=consensus_cosine, n_global_points=4096),
+        _fpfh_pipeline(
+            global_method=global_step("consensus", metric="cosine"), n_global_points=4096
+        ),
         datasets=_SCENES,
         model=None,
         descriptor="fpfh",

@@ -33,9 +33,10 @@ from joblib import effective_n_jobs
 
 from .._utils.compiled import kernel, prange, threads
 from .._utils.params import Interval
+from ..registration import ConsensusGlobal, Matcher
 from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
-from ..registration.steps import ConsensusGlobal
+from ..registration.steps import DESCRIPTOR, MATCHER, GlobalStep
 from ..registration.steps._consensus import compatibility_graphs, consensus_sets
 from ..transforms import from_centred, rigid_transforms
 
@@ -235,67 +236,67 @@ def sc2pcr(
     return from_centred(transformation, centre), len(seeds)
 
 
-class SC2PCRGlobal(ConsensusGlobal):
-    """SC2-PCR as a global step, on exactly the matches :class:`ConsensusGlobal` builds
-    with the same matching parameters (a benchmark peer; the distances are the paper's
-    3DMatch settings, in metres).
+class SC2PCRGlobal(GlobalStep):
+    """SC2-PCR as a global step, on the matches its matcher gives (by default those of
+    :class:`~o3d_rpointhop.ConsensusGlobal`; a benchmark peer, the distances are the
+    paper's 3DMatch settings, in metres).
 
     Parameters
     ----------
+    descriptor : transformer, default=None
+    matcher : Matcher, default=None
+        ``None``: :meth:`ConsensusGlobal.default_matcher
+        <o3d_rpointhop.ConsensusGlobal.default_matcher>`.
     threshold, inlier_threshold, seed_radius : float, default=0.1
         The compatibility threshold (the tight one is half of it), the inlier distance
         of selection and refinement, and the seeds' suppression radius.
     seed_ratio : float, default=0.2
     first_stage, second_stage : int, default=30, 20
-    **matching
-        ``ConsensusGlobal``'s matching parameters (``both_directions``,
-        ``max_matches``, ``cap``, ``mutual_filter``, ``max_ratio``, ``n_jobs``).
+    n_jobs : int, default=None
+        Threads of the compiled kernels (joblib's meaning: ``None`` is one).
     """
 
     name = "sc2pcr"
 
     _parameter_constraints = {
-        **ConsensusGlobal._parameter_constraints,
+        "descriptor": DESCRIPTOR,
+        "matcher": MATCHER,
         "threshold": [_POSITIVE],
         "inlier_threshold": [_POSITIVE],
         "seed_radius": [_POSITIVE],
         "seed_ratio": [Interval(Real, 0, 1, closed="right")],
         "first_stage": [Interval(Integral, 3, None, closed="left")],
         "second_stage": [Interval(Integral, 3, None, closed="left")],
+        "n_jobs": [None, Integral],
     }
 
     def __init__(
         self,
         descriptor: Any = None,
         *,
+        matcher: Matcher | None = None,
         threshold: float = 0.1,
         inlier_threshold: float = 0.1,
         seed_radius: float = 0.1,
         seed_ratio: float = 0.2,
         first_stage: int = 30,
         second_stage: int = 20,
-        mutual_filter: bool = False,
-        both_directions: bool = True,
-        max_ratio: float | None = None,
-        max_matches: int = 8000,
-        cap: str = "index",
         n_jobs: int | None = None,
     ) -> None:
-        super().__init__(
-            descriptor,
-            mutual_filter=mutual_filter,
-            both_directions=both_directions,
-            max_ratio=max_ratio,
-            max_matches=max_matches,
-            cap=cap,
-            n_jobs=n_jobs,
-        )
+        self.descriptor = descriptor
+        self.matcher = matcher
         self.threshold = threshold
         self.inlier_threshold = inlier_threshold
         self.seed_radius = seed_radius
         self.seed_ratio = seed_ratio
         self.first_stage = first_stage
         self.second_stage = second_stage
+        self.n_jobs = n_jobs
+
+    @classmethod
+    def default_matcher(cls) -> Matcher:
+        """:class:`~o3d_rpointhop.ConsensusGlobal`'s matcher."""
+        return ConsensusGlobal.default_matcher()
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         corr = self._matches(context)

@@ -3,7 +3,8 @@
 Modules, one concept each: :mod:`.defaults` (the descriptor and global cloud size used
 when none is given), :mod:`.settings` (the resolution and every distance derived from
 it), :mod:`.context` (the clouds and caches one registration shares),
-:mod:`.correspondences` (descriptor matches), :mod:`.result` (what a registration
+:mod:`.correspondences` (the nearest-descriptor search), :mod:`.matching` (the matcher
+that owns every matching option), :mod:`.result` (what a registration
 returns), :mod:`.checks` (refused input), :mod:`.flags` (the result's flags), the steps in
 :mod:`.steps`, :mod:`.pipeline` (chains and ``register``), :mod:`.evaluate` (scoring a given
 transformation), :mod:`.scoring` (recall for
@@ -14,6 +15,7 @@ from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .correspondences import Correspondences, find_correspondences
 from .evaluate import evaluate
+from .matching import Matcher
 from .multiway import register_multiway
 from .pipeline import RegistrationPipeline, register
 from .result import MultiwayResult, RegistrationResult, StepResult
@@ -37,6 +39,7 @@ __all__ = [
     "Correspondences",
     "FGRGlobal",
     "GeneralizedICP",
+    "Matcher",
     "MultiScaleICP",
     "MultiwayResult",
     "PointToPlaneICP",

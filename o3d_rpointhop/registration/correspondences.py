@@ -17,6 +17,7 @@ from ..descriptors._union import unit_rows
 __all__ = [
     "SALIENT_NEIGHBOURS",
     "Correspondences",
+    "as_features",
     "correspondences_both_ways",
     "count_of",
     "distinctiveness",
@@ -65,6 +66,19 @@ class Correspondences:
         """The matches ``index`` selects (a boolean mask or row indices), in its order."""
         return Correspondences(self.pairs[index], self.distances[index], self.ratios[index])
 
+    def strongest(
+        self, top_k: int | None = None, top_k_ratio: int | None = None
+    ) -> Correspondences:
+        """The R-PointHop paper's selection (Sec. III-B): the ``top_k`` matches with the
+        smallest descriptor distance (M1), then the ``top_k_ratio`` of those with the
+        smallest ratio (M2); counts, ``None`` for no limit. The rows keep their order."""
+        chosen = np.arange(len(self))
+        if top_k is not None and chosen.size > top_k:
+            chosen = chosen[np.argsort(self.distances, kind="stable")[:top_k]]
+        if top_k_ratio is not None and chosen.size > top_k_ratio:
+            chosen = chosen[np.argsort(self.ratios[chosen], kind="stable")[:top_k_ratio]]
+        return self.rows(np.sort(chosen))
+
     def __array__(self, dtype=None, copy=None):
         return self.pairs if dtype is None else self.pairs.astype(dtype)
 
@@ -73,7 +87,10 @@ class Correspondences:
         return o3d.utility.Vector2iVector(self.pairs.astype(np.int32))
 
 
-def _as_features(x, name: str) -> np.ndarray:
+def as_features(x, name: str) -> np.ndarray:
+    """``x`` as an ``(n_points, n_features)`` float array (an Open3D ``Feature`` read as
+    ``data.T``; float32 kept, other types as float64), refused when empty, of another
+    shape, or holding NaN or infinite values (``name`` says which argument)."""
     arr = np.asarray(x.data.T if isinstance(x, o3d.pipelines.registration.Feature) else x)
     if arr.ndim != 2 or arr.shape[0] == 0:
         raise ValueError(
@@ -87,10 +104,10 @@ def _as_features(x, name: str) -> np.ndarray:
 
 
 def _feature_pair(source_features, target_features) -> tuple[np.ndarray, np.ndarray]:
-    """Both sides' descriptors as arrays (:func:`_as_features`), refused when their
+    """Both sides' descriptors as arrays (:func:`as_features`), refused when their
     lengths differ."""
-    src = _as_features(source_features, "source_features")
-    tgt = _as_features(target_features, "target_features")
+    src = as_features(source_features, "source_features")
+    tgt = as_features(target_features, "target_features")
     if src.shape[1] != tgt.shape[1]:
         raise ValueError(
             f"source and target descriptors differ in length: {src.shape[1]} vs {tgt.shape[1]}"
@@ -561,7 +578,7 @@ def distinctiveness(features: np.ndarray, k: int = SALIENT_NEIGHBOURS) -> np.nda
     -------
     ndarray of shape (n,)
     """
-    features = _as_features(features, "features")
+    features = as_features(features, "features")
     k = max(1, min(int(k), len(features) - 1))
     _, dist = nearest_descriptors(features, features, k=k + 1)  # the row itself first
     return dist[:, -1]

@@ -109,7 +109,7 @@ def describe_global(
             raise TypeError(
                 f"frame turns were asked for, but {type(bound).__name__} has no local "
                 "frames to turn (no transform_turns): use RPointHopTransformer, or "
-                "frame_turns=1"
+                "Matcher(frame_turns=1)"
             )
         return np.asarray(call_with_viewpoints(bound.transform_turns, cloud, viewpoint, n_turns))
     return np.asarray(call_with_viewpoints(bound.transform, cloud, viewpoint))

@@ -36,7 +36,7 @@ def _run(capsys, args) -> dict:
 def test_the_printed_defaults_are_a_config_that_changes_nothing(tmp_path, capsys, pair):
     assert main(["config", "-o", str(tmp_path / "c.toml")]) == 0
     config = tomllib.loads((tmp_path / "c.toml").read_text())
-    assert config["consensus"]["max_matches"] == 8000
+    assert config["consensus"]["matcher"]["max_matches"] == 8000
     assert config["settings"]["icp_factors"] == [2.0, 0.5]
     assert {"register", "ransac", "consensus", "point_to_plane", "settings"} <= set(config)
     _, _, files = pair
@@ -48,21 +48,29 @@ def test_the_printed_defaults_are_a_config_that_changes_nothing(tmp_path, capsys
 def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pair):
     source, target, files = pair
     (tmp_path / "c.toml").write_text(
-        "[register]\nglobal_method = 'consensus'\n\n[consensus]\nmax_matches = 300\n\n"
+        "[register]\nglobal_method = 'consensus'\n\n[consensus.matcher]\nmax_matches = 300\n\n"
         "[settings]\nicp_factors = [3.0, 1.0]\n"
     )
     out = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
     assert out["steps"][0]["info"]["candidate_matches"] == 300
     settings = RegistrationSettings(icp_factors=(3.0, 1.0))
-    from o3d_rpointhop import ConsensusGlobal
+    from o3d_rpointhop import ConsensusGlobal, Matcher
 
+    matcher = Matcher(both_directions=True, max_matches=300)
     expected = register(
-        source, target, global_method=ConsensusGlobal(max_matches=300), settings=settings
+        source, target, global_method=ConsensusGlobal(matcher=matcher), settings=settings
     )
     np.testing.assert_allclose(out["transformation"], expected.transformation, atol=1e-9)
     # --set wins over the file, and a flag wins over both.
     out = _run(
-        capsys, [*files, "--config", str(tmp_path / "c.toml"), "--set", "consensus.max_matches=200"]
+        capsys,
+        [
+            *files,
+            "--config",
+            str(tmp_path / "c.toml"),
+            "--set",
+            "consensus.matcher.max_matches=200",
+        ],
     )
     assert out["steps"][0]["info"]["candidate_matches"] == 200
     out = _run(capsys, [*files, "--config", str(tmp_path / "c.toml"), "--global", "ransac"])
@@ -80,18 +88,23 @@ def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pai
         (["--set", "ransac.max_iteration=abc"], "[ransac]: The 'max_iteration' parameter", 2),
         (["--set", "settings.icp_factors=[]"], "[settings]:", 2),
         (
-            ["--global", "consensus", "--set", "consensus.metric=manhattan"],
+            ["--global", "consensus", "--set", "consensus.matcher.metric=manhattan"],
             "[consensus]: The 'metric' parameter",
             2,
         ),
         (  # a section the run does not use is checked too
-            ["--global", "ransac", "--set", "consensus.metric=manhattan"],
+            ["--global", "ransac", "--set", "consensus.matcher.metric=manhattan"],
             "[consensus] (not used by this run): The 'metric' parameter",
             2,
         ),
         (
-            ["--set", "consensus.frame_turns=4", "--set", "consensus.mutual_filter=true"],
-            "[consensus] (not used by this run): ConsensusGlobal: frame_turns=4 cannot",
+            [
+                "--set",
+                "consensus.matcher.frame_turns=4",
+                "--set",
+                "consensus.matcher.mutual_filter=true",
+            ],
+            "[consensus] (not used by this run): Matcher: frame_turns=4 cannot",
             2,
         ),
         (  # a check that relates two parameters: also before any cloud is read
@@ -99,11 +112,11 @@ def test_config_and_set_reach_step_parameters_and_settings(tmp_path, capsys, pai
                 "--global",
                 "consensus",
                 "--set",
-                "consensus.n_nearest=2",
+                "consensus.matcher.n_nearest=2",
                 "--set",
-                "consensus.mutual_filter=true",
+                "consensus.matcher.mutual_filter=true",
             ],
-            "[consensus]: ConsensusGlobal: n_nearest=2 cannot be combined",
+            "[consensus]: Matcher: n_nearest=2 cannot be combined",
             2,
         ),  # fmt: skip
         (["--config", "missing.toml"], "no such config file", EXIT_ERROR),
@@ -148,7 +161,7 @@ def test_outputs_record_their_run_and_config_from_repeats_it(tmp_path, capsys, p
 
     _, _, files = pair
     changed = [
-        "--set", "consensus.max_matches=3000", "--set", "settings.icp_factors=[3.0, 1.0]",
+        "--set", "consensus.matcher.max_matches=3000", "--set", "settings.icp_factors=[3.0, 1.0]",
         "--seed", "4", "--model", "scene", "--result", str(tmp_path / "r.json"),
     ]  # fmt: skip
     out = _run(capsys, [*files, *changed])
@@ -162,7 +175,8 @@ def test_outputs_record_their_run_and_config_from_repeats_it(tmp_path, capsys, p
     assert config["register"]["global_method"] == "consensus"
     assert config["settings"]["icp_factors"] == [3.0, 1.0]
     assert (
-        config["consensus"]["max_matches"] == 3000 and "max_iteration" in config["point_to_plane"]
+        config["consensus.matcher"]["max_matches"] == 3000
+        and "max_iteration" in config["point_to_plane"]
     )
     saved = json.loads((tmp_path / "r.json").read_text())
     assert saved["provenance"] == record

@@ -11,6 +11,7 @@ from helpers import (
     NOT_APPLICABLE,
     SMALL,
     assert_passes_check_estimator,
+    consensus_matcher,
     moved_copy,
     random_motion,
     relative_difference,
@@ -314,7 +315,11 @@ def test_register_and_the_consensus_take_a_union(object_model, turns):
         [("rph", object_model), ("fpfh", FPFHTransformer())], transformer_weights={"fpfh": 0.7}
     )
     result = register(
-        source, target, union, seed=0, global_method=ConsensusGlobal(frame_turns=turns)
+        source,
+        target,
+        union,
+        seed=0,
+        global_method=ConsensusGlobal(matcher=consensus_matcher(frame_turns=turns)),
     )
     assert rotation_error_deg(result.transformation[:3, :3], truth[:3, :3]) < 2.0
     assert np.linalg.norm(result.transformation[:3, 3] - truth[:3, 3]) < 0.02

@@ -77,7 +77,8 @@ def test_as_a_step_it_runs_on_the_consensus_matches():
 
     step = SC2PCRGlobal()
     assert clone(step).get_params() == step.get_params()
-    assert {"threshold", "seed_ratio", "max_matches", "cap"} <= set(step.get_params())
+    assert {"threshold", "seed_ratio", "matcher"} <= set(step.get_params())
+    assert step.default_matcher().get_params() == ConsensusGlobal.default_matcher().get_params()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RegistrationWarning)
         found = RegistrationPipeline([("global", step)], descriptor=descriptor)

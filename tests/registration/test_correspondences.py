@@ -179,12 +179,12 @@ def test_counts_and_shares_at_their_boundaries():
 
 
 def test_integer_descriptors_are_matched_as_their_float_values():
-    from o3d_rpointhop.registration.correspondences import _as_features, find_correspondences
+    from o3d_rpointhop.registration.correspondences import as_features, find_correspondences
 
     rng = np.random.default_rng(4)
     ints = rng.integers(0, 50, (60, 5))
-    assert _as_features(ints, "x").dtype == np.float64
-    assert _as_features(ints.astype(np.float32), "x").dtype == np.float32  # floats kept
+    assert as_features(ints, "x").dtype == np.float64
+    assert as_features(ints.astype(np.float32), "x").dtype == np.float32  # floats kept
     got = find_correspondences(ints, ints[::-1])
     want = find_correspondences(ints.astype(np.float64), ints[::-1].astype(np.float64))
     np.testing.assert_array_equal(np.asarray(got), np.asarray(want))

@@ -5,9 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import CodesBySize, TurnedCodesBySize, global_step_only, moved_part, moved_samples
+from helpers import (
+    CodesBySize,
+    TurnedCodesBySize,
+    consensus_matcher,
+    global_step_only,
+    moved_part,
+    moved_samples,
+)
 
-from o3d_rpointhop import ConsensusGlobal, RANSACGlobal, register
+from o3d_rpointhop import ConsensusGlobal, Matcher, RANSACGlobal, register
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.registration.correspondences import find_correspondences, unit_rows
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
@@ -60,7 +67,12 @@ def _pair_whose_partners_differ_in_length():
 def test_only_the_cosine_distance_finds_partners_that_differ_in_length(make_step):
     source, target, truth, descriptor = _pair_whose_partners_differ_in_length()
     plain = global_step_only(make_step(), source, target, descriptor).steps[0]
-    cosine = global_step_only(make_step(metric="cosine"), source, target, descriptor)
+    cosine = global_step_only(
+        make_step(matcher=make_step.default_matcher().set_params(metric="cosine")),
+        source,
+        target,
+        descriptor,
+    )
     right = _right(cosine.steps[0], truth)
     assert right.sum() == 500  # every partner, and by RANSAC one match per source point
     assert _right(plain, truth).mean() < 0.2
@@ -69,7 +81,9 @@ def test_only_the_cosine_distance_finds_partners_that_differ_in_length(make_step
 
 def test_cosine_matches_are_those_of_the_unit_descriptors():
     source, target, _, descriptor = _pair_whose_partners_differ_in_length()
-    step = global_step_only(RANSACGlobal(metric="cosine"), source, target, descriptor)
+    step = global_step_only(
+        RANSACGlobal(matcher=Matcher(metric="cosine")), source, target, descriptor
+    )
     codes = descriptor.codes
     expected = find_correspondences(unit_rows(codes[500]), unit_rows(codes[600]))
     matched = step.steps[0].matches[:, 1]  # back in the target's frame: to rounding
@@ -85,27 +99,35 @@ def test_cosine_distance_over_frame_turns():
     tgt = rng.normal(size=(4, 600, 8))
     tgt[1, keep] = src[0] * _lengths(rng, 500)[:, None] + rng.normal(0, 1e-4, (500, 8))
     descriptor = TurnedCodesBySize({500: src, 600: tgt})
-    both = ConsensusGlobal(metric="cosine", frame_turns=4, both_directions=False)
+    both = ConsensusGlobal(
+        matcher=consensus_matcher(metric="cosine", frame_turns=4, both_directions=False)
+    )
     found = global_step_only(both, source, target, descriptor)
     assert _right(found.steps[0], truth).sum() == 500
     assert rotation_error_deg(found.transformation, truth) < 0.5
-    for alone in (ConsensusGlobal(frame_turns=4), ConsensusGlobal(metric="cosine")):
+    for alone in (
+        ConsensusGlobal(matcher=consensus_matcher(frame_turns=4)),
+        ConsensusGlobal(matcher=consensus_matcher(metric="cosine")),
+    ):
         step = global_step_only(alone, source, target, descriptor).steps[0]
         assert _right(step, truth).mean() < 0.2
 
 
 def test_a_real_model_registers_with_cosine_matches(object_model):
     source, target, truth = moved_samples()
-    for step in (ConsensusGlobal(metric="cosine"), RANSACGlobal(metric="cosine")):
+    for step in (
+        ConsensusGlobal(matcher=consensus_matcher(metric="cosine")),
+        RANSACGlobal(matcher=Matcher(metric="cosine")),
+    ):
         result = register(source, target, object_model, global_method=step)
         assert rotation_error_deg(result.transformation, truth) < 2.0
 
 
 def test_an_unknown_metric_is_refused():
     with pytest.raises(ValueError, match="metric"):
-        ConsensusGlobal(metric="manhattan").run(None, np.eye(4))
+        ConsensusGlobal(matcher=consensus_matcher(metric="manhattan")).run(None, np.eye(4))
     with pytest.raises(ValueError, match="metric"):
-        RANSACGlobal(metric="cityblock").run(None, np.eye(4))
+        RANSACGlobal(matcher=Matcher(metric="cityblock")).run(None, np.eye(4))
 
 
 def test_the_context_scales_descriptors_once(object_model):

@@ -11,6 +11,7 @@ from sklearn.model_selection import GridSearchCV
 
 from o3d_rpointhop import (
     FPFHTransformer,
+    Matcher,
     PointToPlaneICP,
     RANSACGlobal,
     RegistrationPipeline,
@@ -31,8 +32,11 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
     params = pipe.get_params(deep=True)
     assert params["descriptor__lrf_neighbors"] == 48
     assert params["global__max_iteration"] == 1_000_000 and params["icp__max_iteration"] == 50
-    pipe.set_params(descriptor__lrf_neighbors=32, global__mutual_filter=True)
-    assert pipe.descriptor.lrf_neighbors == 32 and pipe.named_steps["global"].mutual_filter
+    # A matcher's parameters are nested one level deeper (scikit-learn's ``__``).
+    pipe.set_params(global__matcher=Matcher())
+    pipe.set_params(descriptor__lrf_neighbors=32, global__matcher__mutual_filter=True)
+    assert pipe.descriptor.lrf_neighbors == 32
+    assert pipe.named_steps["global"].matcher.mutual_filter
     copy = clone(pipe)
     assert copy.get_params()["descriptor__lrf_neighbors"] == 32
     assert copy.descriptor is not pipe.descriptor

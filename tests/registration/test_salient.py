@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import CodesBySize, global_step_only
+from helpers import CodesBySize, consensus_matcher, global_step_only
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import ConsensusGlobal
@@ -56,7 +56,9 @@ def _pair_with_a_floor():
 def test_the_floors_matches_are_dropped_and_the_pose_found():
     source, target, truth, descriptor = _pair_with_a_floor()
     every = global_step_only(ConsensusGlobal(), source, target, descriptor).steps[0]
-    only = global_step_only(ConsensusGlobal(salient_share=0.3), source, target, descriptor)
+    only = global_step_only(
+        ConsensusGlobal(matcher=consensus_matcher(salient_share=0.3)), source, target, descriptor
+    )
     step = only.steps[0]
     assert step.info["candidate_matches"] < every.info["candidate_matches"]
     # What is left is the object's matches, right under the truth.
@@ -74,7 +76,12 @@ def test_the_floors_matches_are_dropped_and_the_pose_found():
 def test_too_few_salient_matches_is_a_clear_error():
     source, target, _, descriptor = _pair_with_a_floor()
     with pytest.raises(ValueError, match="salient"):
-        global_step_only(ConsensusGlobal(salient_share=0.001), source, target, descriptor)
+        global_step_only(
+            ConsensusGlobal(matcher=consensus_matcher(salient_share=0.001)),
+            source,
+            target,
+            descriptor,
+        )
 
 
 def _pair_with_decoys():
@@ -102,7 +109,10 @@ def test_two_nearest_matches_hold_the_partners_that_are_second_nearest():
     source, target, truth, descriptor = _pair_with_decoys()
     found = {
         k: global_step_only(
-            ConsensusGlobal(n_nearest=k, both_directions=False), source, target, descriptor
+            ConsensusGlobal(matcher=consensus_matcher(n_nearest=k, both_directions=False)),
+            source,
+            target,
+            descriptor,
         )
         for k in (1, 2)
     }
@@ -117,7 +127,9 @@ def test_two_nearest_matches_hold_the_partners_that_are_second_nearest():
 
 def test_two_nearest_both_ways_add_each_target_point_s_two_nearest():
     source, target, truth, descriptor = _pair_with_decoys()
-    result = global_step_only(ConsensusGlobal(n_nearest=2), source, target, descriptor)
+    result = global_step_only(
+        ConsensusGlobal(matcher=consensus_matcher(n_nearest=2)), source, target, descriptor
+    )
     src, tgt = descriptor.codes[400], descriptor.codes[780]
     forward = k_best_correspondences(src, tgt, 2).pairs
     back = k_best_correspondences(tgt, src, 2).pairs[:, ::-1]
@@ -129,9 +141,9 @@ def test_two_nearest_both_ways_add_each_target_point_s_two_nearest():
 
 def test_two_nearest_refuses_the_filters_defined_on_the_nearest_alone():
     for step in (
-        ConsensusGlobal(n_nearest=2, mutual_filter=True),
-        ConsensusGlobal(n_nearest=2, max_ratio=0.9),
+        ConsensusGlobal(matcher=consensus_matcher(n_nearest=2, mutual_filter=True)),
+        ConsensusGlobal(matcher=consensus_matcher(n_nearest=2, max_ratio=0.9)),
     ):
         with pytest.raises(ValueError, match="n_nearest"):
             step._validate_all()
-    ConsensusGlobal(n_nearest=2)._validate_all()
+    ConsensusGlobal(matcher=consensus_matcher(n_nearest=2))._validate_all()

@@ -5,11 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import TurnedCodesBySize, global_step_only, moved_part, moved_samples
+from helpers import (
+    TurnedCodesBySize,
+    consensus_matcher,
+    global_step_only,
+    moved_part,
+    moved_samples,
+)
 
 from o3d_rpointhop import (
     ConsensusGlobal,
     FPFHTransformer,
+    Matcher,
     RANSACGlobal,
     register,
 )
@@ -62,7 +69,9 @@ def _pair_whose_frames_agree_after_a_turn():
 def test_only_matches_over_turns_find_partners_whose_frames_differ_by_a_turn():
     source, target, truth, descriptor = _pair_whose_frames_agree_after_a_turn()
     plain = global_step_only(ConsensusGlobal(), source, target, descriptor).steps[0]
-    turned = global_step_only(ConsensusGlobal(frame_turns=4), source, target, descriptor)
+    turned = global_step_only(
+        ConsensusGlobal(matcher=consensus_matcher(frame_turns=4)), source, target, descriptor
+    )
 
     def right(step):
         moved = apply_transform(step.matches[:, 0], truth)
@@ -79,14 +88,19 @@ def test_only_matches_over_turns_find_partners_whose_frames_differ_by_a_turn():
 
 def test_ransac_matches_over_turns_too():
     source, target, truth, descriptor = _pair_whose_frames_agree_after_a_turn()
-    turned = global_step_only(RANSACGlobal(frame_turns=4), source, target, descriptor)
+    turned = global_step_only(
+        RANSACGlobal(matcher=Matcher(frame_turns=4)), source, target, descriptor
+    )
     moved = apply_transform(turned.steps[0].matches[:, 0], truth)
     right = np.linalg.norm(moved - turned.steps[0].matches[:, 1], axis=1) < 1e-6
     assert right.all() and len(right) == 500  # one match per source point, each right
     assert rotation_error_deg(turned.transformation, truth) < 0.5
     with pytest.raises(ValueError, match="frame_turns=2 cannot be combined"):
         global_step_only(
-            RANSACGlobal(frame_turns=2, mutual_filter=True), source, target, descriptor
+            RANSACGlobal(matcher=Matcher(frame_turns=2, mutual_filter=True)),
+            source,
+            target,
+            descriptor,
         )
 
 
@@ -105,7 +119,7 @@ def test_the_context_keeps_turn_zero_as_the_plain_descriptors(object_model):
 def test_a_real_model_registers_with_matches_over_turns(object_model):
     source, target, truth = moved_samples()
     for turns in (2, 4):
-        step = ConsensusGlobal(frame_turns=turns)
+        step = ConsensusGlobal(matcher=consensus_matcher(frame_turns=turns))
         result = register(source, target, object_model, global_method=step)
         assert rotation_error_deg(result.transformation, truth) < 2.0
 
@@ -114,13 +128,16 @@ def test_turns_need_a_descriptor_with_frames_and_the_nearest_alone():
     cloud = make_object(800)
     with pytest.raises(TypeError, match="no local frames"):
         register(
-            cloud, cloud + 0.1, FPFHTransformer(), global_method=ConsensusGlobal(frame_turns=2)
+            cloud,
+            cloud + 0.1,
+            FPFHTransformer(),
+            global_method=ConsensusGlobal(matcher=consensus_matcher(frame_turns=2)),
         )
     for bad in (dict(mutual_filter=True), dict(max_ratio=0.9), dict(n_nearest=2)):
         with pytest.raises(ValueError, match="frame_turns=4 cannot be combined"):
-            ConsensusGlobal(frame_turns=4, **bad).run(None, np.eye(4))
+            ConsensusGlobal(matcher=consensus_matcher(frame_turns=4, **bad)).run(None, np.eye(4))
     with pytest.raises(ValueError, match="frame_turns"):
-        ConsensusGlobal(frame_turns=3).run(None, np.eye(4))
+        ConsensusGlobal(matcher=consensus_matcher(frame_turns=3)).run(None, np.eye(4))
 
 
 def test_prepare_takes_descriptors_alone_or_with_their_turns(object_model):

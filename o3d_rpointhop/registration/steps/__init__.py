@@ -6,7 +6,7 @@
 global steps share."""
 
 from ._base import OPTIONAL_DISTANCE, RegistrationStep
-from ._global import GlobalStep
+from ._global import DESCRIPTOR, MATCHER, GlobalStep
 from .consensus import ConsensusGlobal
 from .fgr import FGRGlobal, tuple_test
 from .icp import GeneralizedICP, MultiScaleICP, PointToPlaneICP, PointToPointICP
@@ -15,6 +15,8 @@ from .svd import SVDGlobal
 from .symmetry import SymmetryCheck
 
 __all__ = [
+    "DESCRIPTOR",
+    "MATCHER",
     "OPTIONAL_DISTANCE",
     "ConsensusGlobal",
     "FGRGlobal",

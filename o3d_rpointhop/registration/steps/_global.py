@@ -7,23 +7,21 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from ..._utils.params import HasMethods, Interval, Options, StrOptions
-from ...descriptors.pointhop import N_TURNS_ALLOWED
+from ..._utils.params import HasMethods, Interval
 from ..context import RegistrationContext
-from ..correspondences import Correspondences, find_correspondences, turned_correspondences
+from ..correspondences import Correspondences
+from ..matching import Matcher
 from ..result import StepResult
 from ._base import RegistrationStep
-from ._hypotheses import verify
+from ._verification import verify
 
 __all__ = [
     "COUNT",
     "DESCRIPTOR",
-    "FRAME_TURNS",
-    "FRAME_TURNS_DOC",
     "GlobalStep",
     "HYPOTHESES",
-    "METRIC",
-    "METRIC_DOC",
+    "MATCHER",
+    "MATCHER_DOC",
     "N_HYPOTHESES_DOC",
     "with_shared_docs",
 ]
@@ -35,34 +33,15 @@ COUNT = [Interval(Integral, 3, None, closed="left"), Interval(Real, 0, 1, closed
 #: The constraint of a count of hypotheses verified by overlap.
 HYPOTHESES = [Interval(Integral, 1, None, closed="left")]
 
-#: The constraint of the turns of the local frames matched over.
-FRAME_TURNS = [Options(Integral, set(N_TURNS_ALLOWED))]
+#: The constraint of a step's matcher: ``None`` (the step's default) or a Matcher.
+MATCHER = [None, Matcher]
 
-#: The constraint of the distance descriptors are matched by.
-METRIC = [StrOptions({"euclidean", "cosine"})]
-
-#: The docstring of ``metric``, shared by the steps that have it.
-METRIC_DOC = """metric : {"euclidean", "cosine"}, default="euclidean"
-        How descriptors are compared when they are matched (as in scikit-learn's
-        ``NearestNeighbors``). ``"cosine"``: by the angle between them (the
-        Euclidean distance of the descriptors scaled to unit length,
-        :func:`~o3d_rpointhop.registration.correspondences.unit_rows`), so that two
-        descriptors pointing the same way match whatever their lengths; distances,
-        ratios and salient points are then those of the unit descriptors
-        (docs/registration.md, "Matches by cosine distance")."""
-
-#: The docstring of ``frame_turns``, shared by the steps that have it.
-FRAME_TURNS_DOC = """frame_turns : {1, 2, 4}, default=1
-        Match each point's descriptor against the other cloud's descriptors under
-        every turn of their local frames about the normal (a half turn for 2, every
-        quarter turn for 4; ``RPointHopTransformer.transform_turns``): a true
-        correspondence whose frames agree only up to such a turn (on walls, floors
-        and other flat parts the in-plane axes are a matter of sampling) then
-        matches too. Needs a descriptor with local frames (R-PointHop); above 1 it
-        cannot be combined with ``mutual_filter`` or ``max_ratio`` (nor, for the
-        consensus, ``n_nearest``). Costs a Saab projection per turn when describing
-        and ``frame_turns`` times the matching (docs/registration.md, "Frames that
-        agree up to a turn")."""
+#: The docstring of ``matcher``, shared by the global steps.
+MATCHER_DOC = """matcher : Matcher, default=None
+        Which descriptor pairs the step registers
+        (:class:`~o3d_rpointhop.registration.Matcher`: metric, mutual and ratio
+        filters, both directions, k nearest, salient points, frame turns, cap).
+        ``None``: the step's :meth:`default_matcher`, {default}."""
 
 #: The docstring of ``n_hypotheses``, shared by the steps that have it.
 N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
@@ -79,19 +58,18 @@ N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
 
 
 def with_shared_docs(cls: type) -> type:
-    """Write the shared parameter texts (``{n_hypotheses}``, ``{frame_turns}``,
-    ``{metric}``) into a global step's docstring (absent under ``python -OO``)."""
+    """Write the shared parameter texts (``{n_hypotheses}``, ``{matcher}``) into a global
+    step's docstring (absent under ``python -OO``)."""
     if cls.__doc__:
-        cls.__doc__ = (
-            cls.__doc__.replace("{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1))
-            .replace("{frame_turns}", FRAME_TURNS_DOC)
-            .replace("{metric}", METRIC_DOC)
-        )
+        default = repr(cls.default_matcher()).replace("\n", "").replace("  ", "")
+        cls.__doc__ = cls.__doc__.replace(
+            "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
+        ).replace("{matcher}", MATCHER_DOC.format(default=f"``{default}``"))
     return cls
 
 
 class GlobalStep(RegistrationStep):
-    """Base of the global steps: the descriptor they match with and their matches.
+    """Base of the global steps: the descriptor they match with and their matcher.
 
     A global step ignores the incoming transformation. Its descriptor is its own
     ``descriptor`` parameter, else the context's (the pipeline's), else
@@ -101,44 +79,35 @@ class GlobalStep(RegistrationStep):
 
     kind = "global"
 
-    def _descriptors(self) -> tuple:
-        return ((self.descriptor, self._n_turns()),)
+    @classmethod
+    def default_matcher(cls) -> Matcher:
+        """The matcher the step uses when its ``matcher`` is ``None``: nearest
+        descriptors source to target, unfiltered."""
+        return Matcher()
 
-    def _n_turns(self) -> int:
-        """Turns of the local frames the step matches over (``frame_turns``; 1: none)."""
-        return int(getattr(self, "frame_turns", 1))
+    def _matcher(self) -> Matcher:
+        return self.default_matcher() if self.matcher is None else self.matcher
+
+    def _descriptors(self) -> tuple:
+        return ((self.descriptor, self._matcher().frame_turns),)
 
     def _check_params(self) -> None:
-        if self._n_turns() > 1 and (
-            self.mutual_filter or self.max_ratio is not None or getattr(self, "n_nearest", 1) > 1
-        ):
-            raise ValueError(
-                f"{type(self).__name__}: frame_turns={self.frame_turns} cannot be "
-                "combined with mutual_filter, max_ratio or n_nearest > 1 (matches over "
-                "turns take each point's nearest turned descriptor alone)"
-            )
+        self._matcher().validate()
 
-    def _turned(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
-        """Both clouds' descriptors under every turn, ``(frame_turns, n, width)`` each
-        (computed before the plain ones, which are their turn 0)."""
-        n_turns, unit = self._n_turns(), self._unit()
-        return (
-            context.features(self.descriptor, "source", n_turns, unit),
-            context.features(self.descriptor, "target", n_turns, unit),
+    def _features(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
+        """Both clouds' descriptors as the matcher compares them: under every turn
+        (``(frame_turns, n, width)``) or plain, scaled to unit length for the cosine
+        metric (the context computes and scales them once per registration)."""
+        matcher = self._matcher()
+        return tuple(
+            context.features(self.descriptor, which, matcher.frame_turns, matcher.unit)
+            for which in ("source", "target")
         )
 
-    def _describe(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
-        # None: the context's descriptors (prepared, or its descriptor's).
-        unit = self._unit()
-        return (
-            context.features(self.descriptor, "source", unit=unit),
-            context.features(self.descriptor, "target", unit=unit),
-        )
-
-    def _unit(self) -> bool:
-        """Whether the step compares its descriptors scaled to unit length (``metric=
-        "cosine"``; the context scales them once per registration)."""
-        return getattr(self, "metric", "euclidean") == "cosine"
+    def _matches(self, context: RegistrationContext) -> Correspondences:
+        """The step's matches (source index, target index): its matcher on both clouds'
+        descriptors."""
+        return self._matcher()._match(*self._features(context), who=type(self).__name__)
 
     @staticmethod
     def _matched(context: RegistrationContext, corr: Correspondences):
@@ -157,7 +126,7 @@ class GlobalStep(RegistrationStep):
     ) -> tuple[np.ndarray, dict]:
         """The estimate the step returns, and what its choice reports: with several
         hypotheses (best first, ``estimate`` the first), the winner of their
-        verification (:func:`~._hypotheses.verify`, against the step's matches
+        verification (:func:`~._verification.verify`, against the step's matches
         ``corr``) as the step estimated it (the short ICP only scores it: the steps
         after it refine; the step's own choice, kept, is the result ``n_hypotheses=1``
         gives); else ``estimate``."""
@@ -195,34 +164,6 @@ class GlobalStep(RegistrationStep):
             **info,
             **chosen,
         )
-
-    def _correspond(self, context: RegistrationContext, **filters) -> Correspondences:
-        """Every source point's nearest target descriptor, filtered (``filters``), or
-        over every turn of the target's frames (``frame_turns``)."""
-        if self._n_turns() > 1:
-            src_turns, tgt_turns = self._turned(context)
-            corr = turned_correspondences(src_turns[0], tgt_turns)
-        else:
-            src, tgt = self._describe(context)
-            corr = find_correspondences(src, tgt, **filters)
-        return self._filters_left_enough(corr)
-
-    def _filters_left_enough(self, corr: Correspondences) -> Correspondences:
-        """``corr``, refused (:meth:`_enough`) when the filters left fewer than 3."""
-        self._enough(
-            len(corr),
-            "correspondences survived the filters",
-            "relax mutual_filter / max_ratio / top_k",
-        )
-        return corr
-
-    def _enough(self, count: int, what: str, remedy: str) -> None:
-        """Refuse fewer than 3 matches (a rigid motion needs 3), naming the step, what
-        was counted and what to relax."""
-        if count < 3:
-            raise ValueError(
-                f"{type(self).__name__}: only {count} {what}; at least 3 are needed ({remedy})"
-            )
 
     @staticmethod
     def _measured(

@@ -1,6 +1,6 @@
-"""Hypotheses verified by overlap: a global step's best few distinct estimates, each
-refined by a short ICP on the global clouds and scored by how much of both clouds it
-brings together.
+"""The kernels of hypotheses verified by overlap: distinct hypotheses, the overlap score
+of a pose on both clouds and the support of its matches (the verification itself, which
+refines each hypothesis by a short ICP, is the step-level :mod:`._verification`).
 
 A global step ranks its hypotheses by what it sees, the matches (or, for RANSAC, the
 source's fitness). On a pair that overlaps little, a wrong hypothesis can carry more
@@ -13,22 +13,18 @@ was.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..._utils.cells import CellGrid
-from ._trial_icp import refine_point_to_plane
-from .icp import PointToPlaneICP
 
 __all__ = [
     "DISTINCT_ANGLE_DEG",
-    "Verification",
+    "DISTINCT_SHIFT",
+    "apart_from",
     "distinct",
     "match_support",
     "overlap_score",
     "pick_distinct",
-    "verify",
 ]
 
 #: Two hypotheses are distinct when their rotations differ by more than this, or their
@@ -38,39 +34,9 @@ DISTINCT_ANGLE_DEG = 10.0
 DISTINCT_SHIFT = 3.0
 #: Two points overlap only when their normals agree within this angle.
 NORMAL_ANGLE_DEG = 30.0
-#: A hypothesis ranked below the step's own first replaces it only when it scores more
-#: than this share higher: where two poses fit alike (a symmetric shape), the step's
-#: own ranking keeps the say.
-SWITCH_MARGIN = 0.3
-#: ICP iterations a hypothesis is refined by before it is scored.
-REFINE_ITERATIONS = 15
 
 
-@dataclass
-class Verification:
-    """The outcome of :func:`verify`.
-
-    Attributes
-    ----------
-    best : int
-        Index of the winning hypothesis.
-    scores : ndarray of shape (k,)
-        Every hypothesis's overlap score after its refinement, in the order given.
-    refined : ndarray of shape (k, 4, 4)
-        The refined hypotheses.
-    margin : float
-        ``1 - rival / winner``, the rival being the best-scored hypothesis that did not
-        refine into the winner (1 when there is none): 0 is a tie, and below 0 a rival
-        scored higher without beating the step's own choice by :data:`SWITCH_MARGIN`.
-    """
-
-    best: int
-    scores: np.ndarray
-    refined: np.ndarray
-    margin: float
-
-
-def _apart(many: np.ndarray, one: np.ndarray, centre: np.ndarray, shift: float) -> np.ndarray:
+def apart_from(many: np.ndarray, one: np.ndarray, centre: np.ndarray, shift: float) -> np.ndarray:
     """Which of the motions ``many`` (b, 4, 4) differ from ``one`` by more than
     :data:`DISTINCT_ANGLE_DEG` or move ``centre`` more than ``shift`` apart from it."""
     cos = (np.einsum("bji,ji->b", many[:, :3, :3], one[:3, :3]) - 1.0) / 2.0
@@ -89,7 +55,7 @@ def distinct(transformations: np.ndarray, k: int, centre: np.ndarray, shift: flo
         i = int(np.argmax(open_))
         taken.append(i)
         if len(taken) < k:  # only a next pick needs the others compared with this one
-            open_ &= _apart(transformations, transformations[i], centre, shift)
+            open_ &= apart_from(transformations, transformations[i], centre, shift)
     return np.asarray(taken, dtype=np.int64)
 
 
@@ -155,58 +121,3 @@ def match_support(
     a, b = matched
     r2 = ((a @ transformation[:3, :3].T + transformation[:3, 3] - b) ** 2).sum(axis=1)
     return float(np.clip(1.0 - r2 / (distance * distance), 0.0, None).sum())
-
-
-def verify(
-    context, hypotheses: np.ndarray, distance: float, matched: tuple[np.ndarray, np.ndarray]
-) -> Verification:
-    """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
-    global clouds within ``distance`` and score it by its :func:`overlap_score` (with
-    normals) times its :func:`match_support`: the clouds must meet where the pose puts
-    them, and the matches must agree with it. The best score wins if it beats the first
-    hypothesis's (the step's own choice) by more than :data:`SWITCH_MARGIN`; else the
-    first stays.
-
-    Parameters
-    ----------
-    context : RegistrationContext
-    hypotheses : ndarray of shape (k, 4, 4)
-        Best first, as the global step ranked them.
-    distance : float
-        The step's inlier distance: the ICP's correspondence distance and the score's.
-    matched : (ndarray, ndarray)
-        The step's matched source and target points (centred frame), row by row.
-
-    Returns
-    -------
-    Verification
-    """
-    coarse = context.coarse()
-    source = np.asarray(coarse.source.points)
-    target = np.asarray(coarse.target.points)
-    radius = context.settings.normal_radius
-    # Under the keys point-to-plane ICP caches the coarse clouds' normals: estimated once.
-    normals = tuple(
-        np.asarray(coarse.with_normals(cloud, f"{which}-full", radius).normals)
-        for cloud, which in ((coarse.source, "source"), (coarse.target, "target"))
-    )
-    grids = (CellGrid(source, distance), CellGrid(target, distance))
-    if grids[1].on_cells:
-        refined = refine_point_to_plane(source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS)
-    else:  # a cloud too wide for a grid at this distance: Open3D's ICP
-        icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
-        refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
-    scores = np.array(
-        [
-            overlap_score(source, target, t, distance, normals, grids)
-            * match_support(matched, t, distance)
-            for t in refined
-        ]
-    )
-    best = int(np.argmax(scores))
-    if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
-        best = 0
-    centre = source.mean(axis=0)
-    rivals = scores[_apart(refined, refined[best], centre, DISTINCT_SHIFT * distance)]
-    margin = 1.0 if not len(rivals) or scores[best] <= 0 else 1.0 - rivals.max() / scores[best]
-    return Verification(best=best, scores=scores, refined=refined, margin=float(margin))

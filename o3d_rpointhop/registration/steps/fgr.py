@@ -11,20 +11,22 @@ import open3d as o3d
 from ..._utils.params import Interval
 from ..._utils.threads import repeatable_open3d
 from ..context import RegistrationContext
+from ..matching import Matcher
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
 from ._edges import consistent_edges
-from ._global import DESCRIPTOR, GlobalStep
+from ._global import DESCRIPTOR, MATCHER, GlobalStep, with_shared_docs
 
 __all__ = ["FGRGlobal", "tuple_test"]
 
 reg = o3d.pipelines.registration
 
 
+@with_shared_docs
 class FGRGlobal(GlobalStep):
     """Fast Global Registration (Zhou et al., 2016) on descriptor matches, run by Open3D.
 
-    Matches are mutual nearest descriptors by default (FGR's own filter); with
+    Matches are the matcher's, mutual nearest descriptors by default (FGR's own filter); with
     ``tuple_test`` they also pass FGR's tuple test, here vectorised and seeded: random
     triples of matches are kept when their source and target triangles have edge
     lengths within ``tuple_scale`` of each other. The surviving matches go to Open3D's
@@ -33,10 +35,10 @@ class FGRGlobal(GlobalStep):
     Parameters
     ----------
     descriptor : transformer, default=None
+    {matcher}
     max_correspondence_distance : float, default=None
         Open3D's ``maximum_correspondence_distance``; ``None`` is the settings'
         ``fgr_distance`` (1.0 x ``voxel_size``).
-    mutual_filter : bool, default=True
     tuple_test : bool, default=True
     tuple_scale : float, default=0.95
     max_iteration : int, default=64
@@ -47,8 +49,8 @@ class FGRGlobal(GlobalStep):
 
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
+        "matcher": MATCHER,
         "max_correspondence_distance": OPTIONAL_DISTANCE,
-        "mutual_filter": ["boolean"],
         "tuple_test": ["boolean"],
         "tuple_scale": [Interval(Real, 0, 1, closed="neither")],
         "max_iteration": [Interval(Integral, 1, None, closed="left")],
@@ -58,22 +60,27 @@ class FGRGlobal(GlobalStep):
         self,
         descriptor: Any = None,
         *,
+        matcher: Matcher | None = None,
         max_correspondence_distance: float | None = None,
-        mutual_filter: bool = True,
         tuple_test: bool = True,
         tuple_scale: float = 0.95,
         max_iteration: int = 64,
     ) -> None:
         self.descriptor = descriptor
+        self.matcher = matcher
         self.max_correspondence_distance = max_correspondence_distance
-        self.mutual_filter = mutual_filter
         self.tuple_test = tuple_test
         self.tuple_scale = tuple_scale
         self.max_iteration = max_iteration
 
+    @classmethod
+    def default_matcher(cls) -> Matcher:
+        """Mutual nearest descriptors (FGR's own filter)."""
+        return Matcher(mutual_filter=True)
+
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distance = self.max_correspondence_distance or context.settings.fgr_distance
-        corr = self._correspond(context, mutual_filter=self.mutual_filter)
+        corr = self._matches(context)
         pairs = corr.pairs
         if self.tuple_test:
             pairs = tuple_test(

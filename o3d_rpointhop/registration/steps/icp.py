@@ -125,6 +125,8 @@ class _ICPStep(RegistrationStep):
     """Shared parameters, schedule and checks of the single-scale ICP steps."""
 
     name = "icp"
+    #: The robust kernel a result reports; the steps that take one set it as a parameter.
+    kernel: str | None = None
     _parameter_constraints = {
         "max_correspondence_distance": _SCHEDULE,
         "max_iteration": _ITERATIONS,
@@ -173,7 +175,7 @@ class _ICPStep(RegistrationStep):
             current = moved
         info = {
             "max_correspondence_distance": distances,
-            "kernel": getattr(self, "kernel", None),
+            "kernel": self.kernel,
             "passes_undone": undone,
         }
         if isinstance(result, StepResult):

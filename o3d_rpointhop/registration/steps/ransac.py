@@ -9,9 +9,10 @@ import numpy as np
 
 from ..._utils.params import Interval, StrOptions
 from ..context import RegistrationContext
+from ..matching import Matcher
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
-from ._global import DESCRIPTOR, FRAME_TURNS, HYPOTHESES, METRIC, GlobalStep, with_shared_docs
+from ._global import DESCRIPTOR, HYPOTHESES, MATCHER, GlobalStep, with_shared_docs
 from ._ransac import ransac
 
 __all__ = ["RANSACGlobal"]
@@ -21,8 +22,8 @@ __all__ = ["RANSACGlobal"]
 class RANSACGlobal(GlobalStep):
     """RANSAC on descriptor matches.
 
-    Correspondences come from :func:`~o3d_rpointhop.find_correspondences` (nearest
-    descriptor, optionally mutual and ratio-filtered). Hypotheses are drawn, checked
+    Correspondences come from the step's matcher (by default each source point's
+    nearest target descriptor, unfiltered). Hypotheses are drawn, checked
     with Open3D's two checkers (edge-length similarity, then the distance of the
     sample's own points) and scored on the correspondences in vectorised batches, and
     the best one is refitted on its inliers (``o3d_rpointhop.registration.steps._ransac``):
@@ -34,13 +35,10 @@ class RANSACGlobal(GlobalStep):
     ----------
     descriptor : transformer, default=None
         ``None`` uses the pipeline's descriptor.
+    {matcher}
     max_correspondence_distance : float, default=None
         Inlier distance; ``None`` is the settings' ``ransac_distance`` (1.5 x
         ``voxel_size``, Open3D's tutorial ratio).
-    mutual_filter : bool, default=False
-        Keep only mutual nearest descriptors.
-    max_ratio : float, default=None
-        Ratio-test threshold on the matches.
     max_iteration : int, default=1000000
         Upper bound; drawing stops as soon as ``confidence`` is reached, so easy pairs
         take a few hundred iterations. Hard pairs need the room: with 1 % inlier
@@ -57,8 +55,6 @@ class RANSACGlobal(GlobalStep):
         inlier distance of the target (Open3D's rule), then refitted on those cloud
         pairs; ``"matches"``, by the matches it carries (then their residuals), then
         refitted on those matches, as correspondence-graph estimators score.
-    {metric}
-    {frame_turns}
     {n_hypotheses}
     """
 
@@ -66,16 +62,13 @@ class RANSACGlobal(GlobalStep):
 
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
+        "matcher": MATCHER,
         "max_correspondence_distance": OPTIONAL_DISTANCE,
-        "mutual_filter": ["boolean"],
-        "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
         "max_iteration": [Interval(Integral, 1, None, closed="left")],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "ransac_n": [Interval(Integral, 3, None, closed="left")],
         "edge_length": [Interval(Real, 0, 1, closed="left")],
         "selection": [StrOptions({"fitness", "matches"})],
-        "metric": METRIC,
-        "frame_turns": FRAME_TURNS,
         "n_hypotheses": HYPOTHESES,
     }
 
@@ -83,34 +76,28 @@ class RANSACGlobal(GlobalStep):
         self,
         descriptor: Any = None,
         *,
+        matcher: Matcher | None = None,
         max_correspondence_distance: float | None = None,
-        mutual_filter: bool = False,
-        max_ratio: float | None = None,
         max_iteration: int = 1_000_000,
         confidence: float = 0.999,
         ransac_n: int = 3,
         edge_length: float = 0.9,
         selection: str = "fitness",
-        metric: str = "euclidean",
-        frame_turns: int = 1,
         n_hypotheses: int = 1,
     ) -> None:
         self.descriptor = descriptor
+        self.matcher = matcher
         self.max_correspondence_distance = max_correspondence_distance
-        self.mutual_filter = mutual_filter
-        self.max_ratio = max_ratio
         self.max_iteration = max_iteration
         self.confidence = confidence
         self.ransac_n = ransac_n
         self.edge_length = edge_length
         self.selection = selection
-        self.metric = metric
-        self.frame_turns = frame_turns
         self.n_hypotheses = n_hypotheses
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distance = self.max_correspondence_distance or context.settings.ransac_distance
-        corr = self._correspond(context, mutual_filter=self.mutual_filter, max_ratio=self.max_ratio)
+        corr = self._matches(context)
         clouds = tuple(np.asarray(c.points) for c in context.clouds("global"))
         found = ransac(
             *self._matched(context, corr),

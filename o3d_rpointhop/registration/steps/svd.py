@@ -9,12 +9,14 @@ import numpy as np
 from ...transforms import rigid_transform
 from ..context import RegistrationContext
 from ..correspondences import count_of
+from ..matching import Matcher
 from ..result import StepResult
-from ._global import COUNT, DESCRIPTOR, GlobalStep
+from ._global import COUNT, DESCRIPTOR, MATCHER, GlobalStep, with_shared_docs
 
 __all__ = ["SVDGlobal"]
 
 
+@with_shared_docs
 class SVDGlobal(GlobalStep):
     """The R-PointHop paper's one-shot estimate: matches, filters, one SVD.
 
@@ -35,7 +37,7 @@ class SVDGlobal(GlobalStep):
         (0, 1] a share of the source points.
     top_k_ratio : int or float, default=0.125
         Matches then kept by ratio test (M2: 128 of 1024); a count or a share.
-    mutual_filter : bool, default=False
+    {matcher}
     """
 
     name = "svd"
@@ -44,7 +46,7 @@ class SVDGlobal(GlobalStep):
         "descriptor": DESCRIPTOR,
         "top_k": COUNT,
         "top_k_ratio": COUNT,
-        "mutual_filter": ["boolean"],
+        "matcher": MATCHER,
     }
 
     def __init__(
@@ -53,20 +55,18 @@ class SVDGlobal(GlobalStep):
         *,
         top_k: int | float = 0.25,
         top_k_ratio: int | float = 0.125,
-        mutual_filter: bool = False,
+        matcher: Matcher | None = None,
     ) -> None:
         self.descriptor = descriptor
         self.top_k = top_k
         self.top_k_ratio = top_k_ratio
-        self.mutual_filter = mutual_filter
+        self.matcher = matcher
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         n = len(context.global_cloud("source").points)
         top_k = count_of(self.top_k, n, minimum=3)
         top_k_ratio = min(top_k, count_of(self.top_k_ratio, n, minimum=3))
-        corr = self._correspond(
-            context, mutual_filter=self.mutual_filter, top_k=top_k, top_k_ratio=top_k_ratio
-        )
+        corr = self._matches(context).strongest(top_k, top_k_ratio)
         estimate = rigid_transform(*self._matched(context, corr))
         distance = context.settings.evaluation_distance
         check = context.evaluate(estimate, distance, which="global")

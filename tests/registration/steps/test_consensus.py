@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from helpers import motion_matrix, random_motion
 
-from o3d_rpointhop import ConsensusGlobal, RegistrationWarning, register
+from o3d_rpointhop import ConsensusGlobal, Matcher, RegistrationWarning, register
 from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.registration.steps._consensus import compatibility, consensus
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg, translation_error
@@ -112,7 +112,7 @@ def test_the_step_caps_its_matches_and_registers_an_object(object_model):
     rot, shift = random_motion(4, 0.3)
     source = make_object(3000, shape_seed=12, sample_seed=2) @ rot.T + shift
     truth = np.linalg.inv(motion_matrix(rot, shift))
-    capped = ConsensusGlobal(both_directions=True, max_matches=1000)
+    capped = ConsensusGlobal(matcher=Matcher(both_directions=True, max_matches=1000))
     result = register(source, target, object_model, global_method=capped, n_global_points=1500)
     assert result.steps[0].info["candidate_matches"] == 1000
     assert rotation_error_deg(result.transformation, truth) < 2.0
@@ -204,7 +204,7 @@ def test_the_cap_keeps_matches_spread_by_index_or_the_closest_descriptors(cap):
     rng = np.random.default_rng(0)
     cloud = rng.uniform(-1, 1, (400, 3))
     features = rng.normal(size=(400, 8))
-    step = ConsensusGlobal(both_directions=False, max_matches=100, cap=cap)
+    step = ConsensusGlobal(matcher=Matcher(both_directions=False, max_matches=100, cap=cap))
     noisy = features + rng.normal(scale=0.5, size=features.shape)
     context = RegistrationContext(
         cloud,
@@ -212,7 +212,9 @@ def test_the_cap_keeps_matches_spread_by_index_or_the_closest_descriptors(cap):
         voxel_size=0.05,
         prepared=(PreparedCloud(cloud, features), PreparedCloud(cloud, noisy)),
     )
-    everything = ConsensusGlobal(both_directions=False, max_matches=400)._matches(context)
+    everything = ConsensusGlobal(matcher=Matcher(both_directions=False, max_matches=400))._matches(
+        context
+    )
     kept = step._matches(context)
     assert len(everything) == 400 and len(kept) == 100
     if cap == "index":

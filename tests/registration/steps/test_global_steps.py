@@ -11,6 +11,7 @@ import pytest
 from helpers import REPO, assert_close_pose, moved_copy
 
 from o3d_rpointhop import (
+    Matcher,
     RegistrationWarning,
     find_correspondences,
     register,
@@ -219,6 +220,8 @@ def test_filters_that_leave_fewer_than_three_matches_are_a_clear_error():
             n = len(np.asarray(X.points if hasattr(X, "points") else X))
             return np.random.default_rng(n).normal(size=(n, 4))
 
-    pipe = RegistrationPipeline([("global", RANSACGlobal(max_ratio=1e-6))], descriptor=Noise())
+    pipe = RegistrationPipeline(
+        [("global", RANSACGlobal(matcher=Matcher(max_ratio=1e-6)))], descriptor=Noise()
+    )
     with pytest.raises(ValueError, match=r"RANSACGlobal: only 0 correspondences survived"):
         pipe.register(source, target)

@@ -7,12 +7,13 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import CodesBySize
+from helpers import CodesBySize, consensus_matcher
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import (
     ConsensusGlobal,
+    Matcher,
     RANSACGlobal,
     RegistrationPipeline,
     RegistrationWarning,
@@ -23,8 +24,8 @@ from o3d_rpointhop.registration.steps._hypotheses import (
     distinct,
     match_support,
     overlap_score,
-    verify,
 )
+from o3d_rpointhop.registration.steps._verification import verify
 from o3d_rpointhop.transforms import rotation_error_deg
 
 
@@ -75,8 +76,8 @@ def _planted_pair():
 @pytest.mark.parametrize(
     "step",
     [
-        ConsensusGlobal(mutual_filter=True),
-        RANSACGlobal(mutual_filter=True, selection="matches"),
+        ConsensusGlobal(matcher=consensus_matcher(mutual_filter=True)),
+        RANSACGlobal(matcher=Matcher(mutual_filter=True), selection="matches"),
     ],
     ids=["consensus", "ransac"],
 )

@@ -1,0 +1,276 @@
+"""Matching as a stage of its own: :class:`Matcher`, the one owner of every option that
+decides which descriptor pairs a global step sees.
+
+A global step composes a matcher the way scikit-learn's ``RANSACRegressor`` composes
+its ``estimator``: ``ConsensusGlobal(matcher=Matcher(frame_turns=4))``. The step keeps
+only its own parameters (thresholds, iterations, hypotheses); ``matcher=None`` is the
+step's default matcher (:meth:`GlobalStep.default_matcher
+<o3d_rpointhop.registration.steps.GlobalStep.default_matcher>`). The search engine
+(exact nearest descriptors, both ways, over turns) is
+:mod:`~o3d_rpointhop.registration.correspondences`; this module is the policy on top.
+"""
+
+from __future__ import annotations
+
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from .._utils.params import Interval, Options, StrOptions
+from ..descriptors.pointhop import N_TURNS_ALLOWED
+from .correspondences import (
+    Correspondences,
+    as_features,
+    correspondences_both_ways,
+    find_correspondences,
+    k_best_correspondences,
+    salient,
+    turned_correspondences,
+    unit_rows,
+)
+
+__all__ = ["Matcher"]
+
+
+class Matcher(BaseEstimator):
+    """Which descriptor pairs a global step registers: the nearest descriptors, filtered.
+
+    Every source point is matched to the target point with the nearest descriptor (and,
+    with ``both_directions``, every target point to its nearest source descriptor), then
+    filtered (mutual, ratio test, salient points) and capped.
+
+    Parameters
+    ----------
+    metric : {"euclidean", "cosine"}, default="euclidean"
+        How descriptors are compared (as in scikit-learn's ``NearestNeighbors``).
+        ``"cosine"``: by the angle between them (the Euclidean distance of the
+        descriptors scaled to unit length,
+        :func:`~o3d_rpointhop.registration.correspondences.unit_rows`), so that two
+        descriptors pointing the same way match whatever their lengths; distances,
+        ratios and salient points are then those of the unit descriptors
+        (docs/registration.md, "Matches by cosine distance").
+    mutual_filter : bool, default=False
+        Keep only mutual nearest descriptors (Open3D's name for the filter).
+    both_directions : bool, default=False
+        Also match every target point to its nearest source descriptor (ignored with
+        ``mutual_filter``, where both directions agree by definition); a pair found
+        both ways is kept once.
+    max_ratio : float, default=None
+        Ratio-test threshold: keep a match when its descriptor distance is at most this
+        share of the distance to the nearest descriptor of another point.
+    n_nearest : int, default=1
+        Matches per point: each point to its ``n_nearest`` nearest descriptors of the
+        other cloud (k-best matching,
+        :func:`~o3d_rpointhop.registration.correspondences.k_best_correspondences`), so
+        a right partner that is only second nearest is still matched. Above 1 it
+        cannot be combined with ``mutual_filter`` or ``max_ratio``, which are defined
+        on the nearest alone.
+    salient_share : float, default=None
+        Keep only the matches between two salient points: each among this share (in
+        (0, 1]) of its cloud's points whose descriptors are the most distinct within
+        the cloud (the distance to the 10th nearest descriptor of the same cloud,
+        :func:`~o3d_rpointhop.registration.correspondences.distinctiveness`). Walls,
+        floors and table tops, whose descriptors repeat, then stop drowning the few
+        right matches of a pair that overlaps little. ``None``: every match
+        (docs/registration.md, "Pairs that overlap little").
+    frame_turns : {1, 2, 4}, default=1
+        Match each point's descriptor against the other cloud's descriptors under
+        every turn of their local frames about the normal (a half turn for 2, every
+        quarter turn for 4; ``RPointHopTransformer.transform_turns``): a true
+        correspondence whose frames agree only up to such a turn (on walls, floors and
+        other flat parts the in-plane axes are a matter of sampling) then matches too.
+        Needs a descriptor with local frames (R-PointHop); above 1 it cannot be
+        combined with ``mutual_filter``, ``max_ratio`` or ``n_nearest``. Costs a Saab
+        projection per turn when describing and ``frame_turns`` times the matching
+        (docs/registration.md, "Frames that agree up to a turn").
+    max_matches : int, default=None
+        Most matches kept (``None``: all). The correspondence graph of
+        :class:`~o3d_rpointhop.ConsensusGlobal` grows with the square of its matches.
+    cap : {"index", "distance"}, default="index"
+        Which matches stay when there are more than ``max_matches``: evenly spread by
+        index (no region favoured), or the smallest descriptor distances (which favours
+        flat, repeated regions, whose descriptors are the most alike).
+
+    See Also
+    --------
+    o3d_rpointhop.find_correspondences : The nearest descriptors with filters, as a function.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from o3d_rpointhop.registration import Matcher
+    >>> a = np.eye(4)
+    >>> Matcher(mutual_filter=True).match(a, a[::-1]).pairs[:, 1].tolist()
+    [3, 2, 1, 0]
+    """
+
+    _parameter_constraints = {
+        "metric": [StrOptions({"euclidean", "cosine"})],
+        "mutual_filter": ["boolean"],
+        "both_directions": ["boolean"],
+        "max_ratio": [None, Interval(Real, 0, None, closed="neither")],
+        "n_nearest": [Interval(Integral, 1, None, closed="left")],
+        "salient_share": [None, Interval(Real, 0, 1, closed="right")],
+        "frame_turns": [Options(Integral, set(N_TURNS_ALLOWED))],
+        "max_matches": [None, Interval(Integral, 3, None, closed="left")],
+        "cap": [StrOptions({"index", "distance"})],
+    }
+
+    def __init__(
+        self,
+        *,
+        metric: str = "euclidean",
+        mutual_filter: bool = False,
+        both_directions: bool = False,
+        max_ratio: float | None = None,
+        n_nearest: int = 1,
+        salient_share: float | None = None,
+        frame_turns: int = 1,
+        max_matches: int | None = None,
+        cap: str = "index",
+    ) -> None:
+        self.metric = metric
+        self.mutual_filter = mutual_filter
+        self.both_directions = both_directions
+        self.max_ratio = max_ratio
+        self.n_nearest = n_nearest
+        self.salient_share = salient_share
+        self.frame_turns = frame_turns
+        self.max_matches = max_matches
+        self.cap = cap
+
+    @property
+    def unit(self) -> bool:
+        """Whether descriptors are compared scaled to unit length (``metric="cosine"``)."""
+        return self.metric == "cosine"
+
+    def validate(self) -> None:
+        """Check every parameter and how they combine.
+
+        Raises
+        ------
+        ValueError
+            Naming the first bad parameter or combination.
+        """
+        self._validate_params()
+        exclusive = self.mutual_filter or self.max_ratio is not None
+        if self.n_nearest > 1 and exclusive:
+            raise ValueError(
+                f"Matcher: n_nearest={self.n_nearest} cannot be combined with "
+                "mutual_filter or max_ratio (both are defined on the nearest descriptor "
+                "alone)"
+            )
+        if self.frame_turns > 1 and (exclusive or self.n_nearest > 1):
+            raise ValueError(
+                f"Matcher: frame_turns={self.frame_turns} cannot be combined with "
+                "mutual_filter, max_ratio or n_nearest > 1 (matches over turns take each "
+                "point's nearest turned descriptor alone)"
+            )
+
+    def match(self, source_features, target_features) -> Correspondences:
+        """The matches between two clouds' descriptors.
+
+        Parameters
+        ----------
+        source_features, target_features : array-like
+            One row per point, ``(n, d)`` and ``(m, d)`` (or Open3D ``Feature``); with
+            ``frame_turns`` above 1 the descriptors under every turn, ``(frame_turns, n,
+            d)`` and ``(frame_turns, m, d)`` (``RPointHopTransformer.transform_turns``),
+            turn 0 being the plain descriptors.
+
+        Returns
+        -------
+        Correspondences
+            ``(source index, target index)`` rows with their descriptor distances and
+            ratios.
+
+        Raises
+        ------
+        ValueError
+            For bad parameters, descriptors of the wrong shape, or fewer than 3 matches
+            left by the filters.
+        """
+        self.validate()
+        dims = 2 if self.frame_turns == 1 else 3
+        arrays = []
+        for name, value in (("source", source_features), ("target", target_features)):
+            array = as_features(value, f"{name}_features") if dims == 2 else np.asarray(value)
+            if not np.issubdtype(array.dtype, np.floating):
+                array = array.astype(np.float64)
+            if array.ndim != dims or (dims == 3 and array.shape[0] != self.frame_turns):
+                want = "(n, d)" if dims == 2 else f"({self.frame_turns}, n, d)"
+                raise ValueError(
+                    f"{name}_features must be {want} for frame_turns={self.frame_turns}, "
+                    f"got shape {array.shape}"
+                )
+            if not np.isfinite(array).all():
+                raise ValueError(f"{name}_features hold NaN or infinite values")
+            arrays.append(unit_rows(array) if self.unit else array)
+        return self._match(*arrays)
+
+    def _match(self, src: np.ndarray, tgt: np.ndarray, who: str = "Matcher") -> Correspondences:
+        """:meth:`match` on checked descriptors already scaled for the metric (what a
+        global step passes: the context caches them once per registration); ``who``
+        names the caller in the errors."""
+        turned = self.frame_turns > 1
+        plain_src, plain_tgt = (src[0], tgt[0]) if turned else (src, tgt)
+        both_ways = self.both_directions and not self.mutual_filter
+        back = None
+        if both_ways and not turned:
+            # Both directions from one pass over the descriptors' distances.
+            corr, back = correspondences_both_ways(
+                src, tgt, max_ratio=self.max_ratio, k=self.n_nearest
+            )
+            if self.n_nearest == 1:
+                _enough(who, len(corr), "correspondences survived the filters", _RELAX)
+        elif self.n_nearest > 1:
+            corr = k_best_correspondences(src, tgt, self.n_nearest)
+        elif turned:
+            corr = turned_correspondences(plain_src, tgt)
+            _enough(who, len(corr), "correspondences survived the filters", _RELAX)
+            if both_ways:
+                back = turned_correspondences(plain_tgt, src)
+        else:
+            corr = find_correspondences(
+                src, tgt, mutual_filter=self.mutual_filter, max_ratio=self.max_ratio
+            )
+            _enough(who, len(corr), "correspondences survived the filters", _RELAX)
+        if back is not None:
+            both = Correspondences(
+                np.concatenate([corr.pairs, back.pairs[:, ::-1]]),
+                np.concatenate([corr.distances, back.distances]),
+                np.concatenate([corr.ratios, back.ratios]),
+            )
+            _, first = np.unique(both.pairs, axis=0, return_index=True)
+            corr = both.rows(np.sort(first))
+        if self.salient_share is not None:
+            share = float(self.salient_share)
+            keep = (
+                salient(plain_src, share)[corr.pairs[:, 0]]
+                & salient(plain_tgt, share)[corr.pairs[:, 1]]
+            )
+            _enough(
+                who,
+                int(keep.sum()),
+                "matches join two salient points",
+                f"raise the matcher's salient_share={share}",
+            )
+            corr = corr.rows(keep)
+        if self.max_matches is not None and len(corr) > self.max_matches:
+            if self.cap == "distance":
+                keep = np.sort(np.argsort(corr.distances, kind="stable")[: self.max_matches])
+            else:  # evenly by index: no region is favoured for its similar descriptors
+                keep = np.unique(np.linspace(0, len(corr) - 1, self.max_matches).astype(np.int64))
+            corr = corr.rows(keep)
+        return corr
+
+
+_RELAX = "relax the matcher's mutual_filter / max_ratio"
+
+
+def _enough(who: str, count: int, what: str, remedy: str) -> None:
+    """Refuse fewer than 3 matches (a rigid motion needs 3), naming the caller, what was
+    counted and what to relax."""
+    if count < 3:
+        raise ValueError(f"{who}: only {count} {what}; at least 3 are needed ({remedy})")

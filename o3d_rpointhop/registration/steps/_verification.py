@@ -1,0 +1,103 @@
+"""Hypotheses verified by overlap: a global step's best few distinct estimates, each
+refined by a short point-to-plane ICP on the global clouds and scored by how much of
+both clouds it brings together (:func:`verify`; its kernels are in :mod:`._hypotheses`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..._utils.cells import CellGrid
+from ._hypotheses import DISTINCT_SHIFT, apart_from, match_support, overlap_score
+from ._trial_icp import refine_point_to_plane
+from .icp import PointToPlaneICP
+
+__all__ = ["REFINE_ITERATIONS", "SWITCH_MARGIN", "Verification", "verify"]
+
+#: A hypothesis ranked below the step's own first replaces it only when it scores more
+#: than this share higher: where two poses fit alike (a symmetric shape), the step's
+#: own ranking keeps the say.
+SWITCH_MARGIN = 0.3
+#: ICP iterations a hypothesis is refined by before it is scored.
+REFINE_ITERATIONS = 15
+
+
+@dataclass
+class Verification:
+    """The outcome of :func:`verify`.
+
+    Attributes
+    ----------
+    best : int
+        Index of the winning hypothesis.
+    scores : ndarray of shape (k,)
+        Every hypothesis's overlap score after its refinement, in the order given.
+    refined : ndarray of shape (k, 4, 4)
+        The refined hypotheses.
+    margin : float
+        ``1 - rival / winner``, the rival being the best-scored hypothesis that did not
+        refine into the winner (1 when there is none): 0 is a tie, and below 0 a rival
+        scored higher without beating the step's own choice by :data:`SWITCH_MARGIN`.
+    """
+
+    best: int
+    scores: np.ndarray
+    refined: np.ndarray
+    margin: float
+
+
+def verify(
+    context, hypotheses: np.ndarray, distance: float, matched: tuple[np.ndarray, np.ndarray]
+) -> Verification:
+    """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
+    global clouds within ``distance`` and score it by its :func:`overlap_score` (with
+    normals) times its :func:`match_support`: the clouds must meet where the pose puts
+    them, and the matches must agree with it. The best score wins if it beats the first
+    hypothesis's (the step's own choice) by more than :data:`SWITCH_MARGIN`; else the
+    first stays.
+
+    Parameters
+    ----------
+    context : RegistrationContext
+    hypotheses : ndarray of shape (k, 4, 4)
+        Best first, as the global step ranked them.
+    distance : float
+        The step's inlier distance: the ICP's correspondence distance and the score's.
+    matched : (ndarray, ndarray)
+        The step's matched source and target points (centred frame), row by row.
+
+    Returns
+    -------
+    Verification
+    """
+    coarse = context.coarse()
+    source = np.asarray(coarse.source.points)
+    target = np.asarray(coarse.target.points)
+    radius = context.settings.normal_radius
+    # Under the keys point-to-plane ICP caches the coarse clouds' normals: estimated once.
+    normals = tuple(
+        np.asarray(coarse.with_normals(cloud, f"{which}-full", radius).normals)
+        for cloud, which in ((coarse.source, "source"), (coarse.target, "target"))
+    )
+    grids = (CellGrid(source, distance), CellGrid(target, distance))
+    if grids[1].on_cells:
+        refined = refine_point_to_plane(source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS)
+    else:  # a cloud too wide for a grid at this distance: Open3D's ICP
+        icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
+        refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
+    scores = np.array(
+        [
+            overlap_score(source, target, t, distance, normals, grids)
+            * match_support(matched, t, distance)
+            for t in refined
+        ]
+    )
+    best = int(np.argmax(scores))
+    if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
+        best = 0
+    centre = source.mean(axis=0)
+    rivals = scores[apart_from(refined, refined[best], centre, DISTINCT_SHIFT * distance)]
+    margin = 1.0 if not len(rivals) or scores[best] <= 0 else 1.0 - rivals.max() / scores[best]
+    return Verification(best=best, scores=scores, refined=refined, margin=float(margin))

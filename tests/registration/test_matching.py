@@ -1,0 +1,126 @@
+"""The matcher as a stage of its own: the same matches as the search functions it wraps,
+its checks, and the global steps composing it (their own parameters only)."""
+
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+
+from o3d_rpointhop import (
+    ConsensusGlobal,
+    FGRGlobal,
+    Matcher,
+    RANSACGlobal,
+    SVDGlobal,
+    find_correspondences,
+)
+from o3d_rpointhop.registration.correspondences import (
+    correspondences_both_ways,
+    turned_correspondences,
+    unit_rows,
+)
+
+
+def _codes(seed=0, n=200, m=240, d=6):
+    rng = np.random.default_rng(seed)
+    return rng.normal(size=(n, d)), rng.normal(size=(m, d))
+
+
+def test_plain_and_filtered_matches_are_find_correspondences():
+    a, b = _codes()
+    for params in ({}, {"mutual_filter": True}, {"max_ratio": 0.9}):
+        got = Matcher(**params).match(a, b)
+        want = find_correspondences(a, b, **params)
+        np.testing.assert_array_equal(got.pairs, want.pairs)
+        np.testing.assert_array_equal(got.distances, want.distances)
+
+
+def test_both_directions_keep_a_pair_found_both_ways_once():
+    a, b = _codes(1)
+    got = Matcher(both_directions=True).match(a, b)
+    forward, back = correspondences_both_ways(a, b)
+    expected = np.unique(np.r_[forward.pairs, back.pairs[:, ::-1]], axis=0)
+    assert len(expected) < len(forward) + len(back)  # some pairs are mutual
+    np.testing.assert_array_equal(np.unique(got.pairs, axis=0), expected)
+    assert len(got) == len(expected)
+
+
+def test_cosine_matches_are_those_of_unit_rows():
+    a, b = _codes(2)
+    lengths = np.random.default_rng(3).uniform(0.1, 10, size=(len(b), 1))
+    got = Matcher(metric="cosine").match(a, b * lengths)
+    np.testing.assert_array_equal(got.pairs, find_correspondences(unit_rows(a), unit_rows(b)).pairs)
+
+
+def test_turned_matches_and_their_shape_check():
+    rng = np.random.default_rng(4)
+    a, b = rng.normal(size=(4, 50, 5)), rng.normal(size=(4, 60, 5))
+    got = Matcher(frame_turns=4).match(a, b)
+    np.testing.assert_array_equal(got.pairs, turned_correspondences(a[0], b).pairs)
+    with pytest.raises(ValueError, match=r"\(4, n, d\) for frame_turns=4"):
+        Matcher(frame_turns=4).match(a[0], b[0])
+    with pytest.raises(ValueError, match=r"\(n_points, n_features\) array"):
+        Matcher().match(a, b)
+
+
+def test_the_cap_and_salient_points_bound_the_matches():
+    a, b = _codes(5, n=400, m=400)
+    everything = Matcher(both_directions=True).match(a, b)
+    capped = Matcher(both_directions=True, max_matches=100).match(a, b)
+    assert len(everything) > 400 and len(capped) == 100
+    assert all(tuple(p) in set(map(tuple, everything.pairs)) for p in capped.pairs)
+    salient = Matcher(salient_share=0.5).match(a, b)
+    assert 3 <= len(salient) < len(Matcher().match(a, b))
+
+
+@pytest.mark.parametrize(
+    "params, message",
+    [
+        ({"metric": "manhattan"}, "metric"),
+        ({"n_nearest": 2, "mutual_filter": True}, "n_nearest=2 cannot be combined"),
+        ({"frame_turns": 4, "max_ratio": 0.8}, "frame_turns=4 cannot be combined"),
+        ({"frame_turns": 3}, "frame_turns"),
+        ({"max_matches": 2}, "max_matches"),
+    ],
+)
+def test_bad_parameters_are_refused(params, message):
+    a, b = _codes()
+    with pytest.raises(ValueError, match=message):
+        Matcher(**params).match(a, b)
+    with pytest.raises(ValueError, match=message):  # and by the step, before it runs
+        ConsensusGlobal(matcher=Matcher(**params)).run(None, np.eye(4))
+
+
+def test_bad_descriptors_are_refused():
+    a, b = _codes()
+    a[3, 2] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        Matcher().match(a, b)
+    with pytest.raises(ValueError, match="differ in length"):
+        Matcher().match(b[:, :4], b)
+    with pytest.raises(ValueError, match="survived the filters"):
+        Matcher(max_ratio=1e-9).match(*_codes())
+
+
+@pytest.mark.parametrize("step", [ConsensusGlobal, RANSACGlobal, FGRGlobal, SVDGlobal])
+def test_steps_compose_a_matcher_and_keep_their_own_parameters(step):
+    params = step().get_params(deep=False)
+    assert params["matcher"] is None
+    assert not set(params) & set(Matcher().get_params())  # no matching option on a step
+    assert len(params) <= 10
+    chosen = step(matcher=Matcher(metric="cosine"))
+    assert chosen.get_params(deep=True)["matcher__metric"] == "cosine"
+    copy = clone(chosen)
+    assert copy.matcher is not chosen.matcher and copy.matcher.metric == "cosine"
+    assert isinstance(step.default_matcher(), Matcher)
+
+
+def test_no_step_probes_attributes_it_may_not_have():
+    steps = Path(inspect.getfile(ConsensusGlobal)).parent
+    for path in steps.glob("*.py"):
+        assert not re.search(r"getattr\(self,", path.read_text()), path.name
