@@ -173,8 +173,8 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
 
         Returns
         -------
-        descriptors : ndarray of shape (n_points, n_features_out_), a list of them for a
-            list input, or an ndarray of shape (n_clouds, n_points, n_features_out_)
+        descriptors : ndarray of shape (n_points, ``n_features_out_``), a list of them for a
+            list input, or an ndarray of shape (n_clouds, n_points, ``n_features_out_``)
             for a 3-D array input; float32.
 
         Raises
@@ -209,9 +209,9 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
 
         Returns
         -------
-        descriptors : ndarray of shape (n_turns, n_points, n_features_out_), or a list
+        descriptors : ndarray of shape (n_turns, n_points, ``n_features_out_``), or a list
             of them for a list input, or an ndarray of shape
-            (n_clouds, n_turns, n_points, n_features_out_) for a 3-D array input
+            (n_clouds, n_turns, n_points, ``n_features_out_``) for a 3-D array input
 
         Raises
         ------
