@@ -211,7 +211,7 @@ def registration_options(
         raise UsageError(f"[register]: {exc}") from None
     for _, step in chain:  # every value checked now, before any cloud is read
         try:
-            step._validate_all()
+            step.validate()
         except (ValueError, TypeError) as exc:
             raise UsageError(f"[{_section_of(step)[0]}]: {exc}") from None
     _check_unused_steps(config, {_section_of(step)[0] for _, step in chain})
@@ -252,7 +252,7 @@ def _check_unused_steps(config: dict[str, dict], used: set[str]) -> None:
     for name, step_class in _steps().items():
         if name in built and name not in used:
             try:
-                step_class(**built[name])._validate_all()
+                step_class(**built[name]).validate()
             except (ValueError, TypeError) as exc:
                 raise UsageError(f"[{name}] (not used by this run): {exc}") from None
 
@@ -360,9 +360,10 @@ def descriptor_from(
     ``fpfh_weight`` (:data:`~o3d_rpointhop.registration.defaults.SCENE_FPFH_WEIGHT`
     unless given). ``None`` as the descriptor
     leaves the choice to the library (its default descriptor), unless axes or threads
-    are set, which then apply to that default. ``registering``: the paper's model
-    (``modelnet40``) comes on the 128 axes registration matches; otherwise (``describe``)
-    as ``pretrained()`` gives it, and the default is the paper's model.
+    are set, which then apply to that default. A model named by ``--model`` is what
+    ``RPointHopTransformer.pretrained(name)`` gives (``--n-components`` its
+    ``n_components``); with ``registering`` off (``describe``) the default is the
+    paper's model.
     """
     section = {**DESCRIPTOR_KEYS, **config.get("descriptor", {})}
     for key, value in (("kind", kind), ("model", model), ("n_components", n_components)):
@@ -392,7 +393,7 @@ def descriptor_from(
             transformer_weights={"fpfh": section["fpfh_weight"]},
         )
         try:
-            union._parts()
+            union.validate()
         except ValueError as exc:
             raise UsageError(f"[descriptor]: {exc}") from None
         return union, {**section, "fpfh": estimator_section(fpfh)}
@@ -409,7 +410,7 @@ def _fpfh_from(config: dict[str, dict], n_jobs: int | None) -> Any:
     params = dict(config.get("fpfh", {}))
     descriptor = FPFHTransformer(**params, **({} if n_jobs is None else {"n_jobs": n_jobs}))
     try:
-        descriptor._validate_params()
+        descriptor.validate()
     except (ValueError, TypeError) as exc:
         raise UsageError(f"[fpfh]: {exc}") from None
     return descriptor
@@ -418,23 +419,18 @@ def _fpfh_from(config: dict[str, dict], n_jobs: int | None) -> Any:
 def _rpointhop_from(section: dict[str, Any], registering: bool) -> Any:
     """The R-PointHop model ``section`` names, on its axes and threads (``section`` is
     completed with what was left to the defaults): no model named is the library's
-    default model when registering, the paper's model otherwise; the paper's model as
-    registration matches it is on 128 axes unless the axes are given."""
+    default model when registering, the paper's model otherwise."""
     from ..registration.defaults import DEFAULT_MODEL
     from ._common import load_model
 
     if section["model"] is None:
         section["model"] = DEFAULT_MODEL if registering else "modelnet40"
     name, n_jobs = section["model"], section["n_jobs"]
-    if registering and name == "modelnet40" and section["n_components"] is None:
-        from ..registration.defaults import REGISTRATION_COMPONENTS
-
-        section["n_components"] = REGISTRATION_COMPONENTS
     try:
         descriptor = load_model(name, section["n_components"])
         if n_jobs is not None:
             descriptor.set_params(n_jobs=n_jobs)
-            descriptor._validate_params()
+            descriptor.validate()
     except (ValueError, TypeError) as exc:
         if isinstance(exc, ValueError) and not Path(str(name)).exists():
             raise

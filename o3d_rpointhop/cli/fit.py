@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         params["n_components"] = args.n_components
     try:
         estimator = RPointHopTransformer(**params)
-        estimator._validate_params()
+        estimator.validate()
     except (ValueError, TypeError) as exc:
         raise UsageError(f"[fit]: {exc}") from None
     check_output_path(args.output)

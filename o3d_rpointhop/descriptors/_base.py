@@ -113,6 +113,16 @@ class BaseDescriptor(
         """
         return self.fit(X, y, viewpoints=viewpoints).transform(X, viewpoints=viewpoints)
 
+    def validate(self) -> None:
+        """Check every parameter against its constraints without fitting or describing.
+
+        Raises
+        ------
+        ValueError
+            Naming the first bad parameter (scikit-learn's ``InvalidParameterError``).
+        """
+        self._validate_params()
+
     def at_resolution(self, voxel_size: float, settings: Any = None) -> BaseDescriptor:
         """The descriptor a registration at resolution ``voxel_size`` describes with:
         this one, unless it has distances left to the registration (FPFH's ``"auto"``

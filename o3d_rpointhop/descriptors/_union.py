@@ -98,6 +98,17 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
 
     # -- parameters -------------------------------------------------------------------
 
+    def validate(self) -> None:
+        """Check the parts and their weights without describing (each part checks its
+        own parameters when it is fitted or describes).
+
+        Raises
+        ------
+        ValueError, TypeError
+            For a malformed part list, a part without ``transform`` or a bad weight.
+        """
+        self._parts()
+
     def _parts(self) -> list[tuple[str, Any, float]]:
         """The checked parts: ``(name, transformer, weight)``."""
         parts = self.transformer_list

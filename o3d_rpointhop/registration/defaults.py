@@ -11,7 +11,6 @@ __all__ = [
     "DEFAULT_MODEL",
     "DEFAULT_GLOBAL_METHOD",
     "DEFAULT_GLOBAL_POINTS",
-    "REGISTRATION_COMPONENTS",
     "SCENE_FPFH_WEIGHT",
     "TRUST_SUPPORT",
     "default_descriptor",
@@ -26,14 +25,6 @@ __all__ = [
 #: 100 / 99.3 / 79.2 % at 0.29x / 0.25x / 0.32x the time of Open3D's FPFH recipe,
 #: against the paper's four-hop model's 100 / 98.6 / 71.5 % at 0.44x / 0.41x / 0.47x.
 DEFAULT_MODEL = "object"
-
-#: Principal axes of the paper's four-hop ModelNet40 model that registration matches
-#: when that model is asked for by name (``--model modelnet40``), chosen on pairs of
-#: ModelNet40 *training* shapes (seed 7; success of register() with 64 / 128 axes / the
-#: full 1624-D descriptor): resampled 66.7 / 68.8 / 60.4 %, paper-partial 83.3 / 87.5 /
-#: 89.6 %, resampled-partial 43.8 / 45.8 / 45.8 %. 128 axes also make matching and
-#: RANSAC several times cheaper than 1624.
-REGISTRATION_COMPONENTS = 128
 
 #: The least ``RegistrationResult.support`` (share of the global step's matches the
 #: pose explains) of a result the command line trusts, chosen on every official pair

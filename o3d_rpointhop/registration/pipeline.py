@@ -188,7 +188,7 @@ class RegistrationPipeline(_BaseComposition):
         steps = _check_steps(self.steps)
         for name, step in steps:
             try:
-                step._validate_all()
+                step.validate()
             except InvalidParameterError as exc:  # say which step, whoever called
                 raise ValueError(f"step {name!r}: {exc}") from None
         return steps

@@ -135,8 +135,8 @@ def test_bad_settings_get_one_line(tmp_path, monkeypatch, capsys, pair, extra, m
 
 
 def test_model_object_runs_what_the_default_runs(capsys, pair):
-    """``--model object`` is the default; ``--model modelnet40`` is the paper's model on
-    the 128 axes registration matches."""
+    """``--model object`` is the default; ``--model X`` is what ``pretrained("X")`` gives,
+    registering or describing (``--n-components`` its axes)."""
     from o3d_rpointhop.cli._config import descriptor_from
 
     _, _, files = pair
@@ -144,8 +144,11 @@ def test_model_object_runs_what_the_default_runs(capsys, pair):
     named = _run(capsys, [*files, "--model", "object"])
     assert named["transformation"] == default["transformation"]
     paper, section = descriptor_from({}, "rpointhop", "modelnet40")
-    assert paper.n_features_out_ == 128 and len(paper.n_neighbors) == 4
-    assert section["n_components"] == 128
+    assert paper.n_features_out_ == 1624 and len(paper.n_neighbors) == 4
+    assert section["n_components"] is None
+    for registering in (True, False):
+        axes, _ = descriptor_from({}, "rpointhop", "modelnet40", 128, registering=registering)
+        assert axes.n_features_out_ == 128
     assert descriptor_from({}, None, None) == (
         None,
         {**section, "model": None, "n_components": None},

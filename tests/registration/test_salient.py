@@ -145,5 +145,5 @@ def test_two_nearest_refuses_the_filters_defined_on_the_nearest_alone():
         ConsensusGlobal(matcher=consensus_matcher(n_nearest=2, max_ratio=0.9)),
     ):
         with pytest.raises(ValueError, match="n_nearest"):
-            step._validate_all()
-    ConsensusGlobal(matcher=consensus_matcher(n_nearest=2))._validate_all()
+            step.validate()
+    ConsensusGlobal(matcher=consensus_matcher(n_nearest=2)).validate()

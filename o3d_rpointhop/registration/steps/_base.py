@@ -50,10 +50,16 @@ class RegistrationStep(BaseEstimator):
     name = "step"
     _parameter_constraints: dict = {}
 
-    def _validate_all(self) -> None:
-        """Check every parameter (declaratively, then :meth:`_check_params`); a
-        ``ValueError`` (scikit-learn's ``InvalidParameterError`` for the declarative
-        part) names the first bad one."""
+    def validate(self) -> None:
+        """Check every parameter (declaratively, then :meth:`_check_params`) without
+        running the step.
+
+        Raises
+        ------
+        ValueError
+            Naming the first bad parameter (scikit-learn's ``InvalidParameterError`` for
+            the declarative part).
+        """
         self._validate_params()
         self._check_params()
 
@@ -77,7 +83,7 @@ class RegistrationStep(BaseEstimator):
         ValueError
             For a parameter outside its constraints.
         """
-        self._validate_all()
+        self.validate()
         return self._run_timed(context, transformation)
 
     def _run_timed(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:

@@ -108,7 +108,7 @@ class SymmetryCheck(RegistrationStep):
             raise ValueError(f"refine must be None or a refinement step, got {self.refine!r}")
         if isinstance(refine, SymmetryCheck):
             raise ValueError("refine must not be another SymmetryCheck")
-        refine._validate_all()
+        refine.validate()
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         # A copy (validated with this step) refines every candidate.

@@ -173,7 +173,7 @@ def test_distinct_keeps_the_best_of_each_pose():
 
 def test_n_hypotheses_is_checked():
     with pytest.raises(ValueError, match="n_hypotheses"):
-        RANSACGlobal(n_hypotheses=0)._validate_all()
+        RANSACGlobal(n_hypotheses=0).validate()
 
 
 def test_overlap_score_turns_the_normals_with_the_pose():
