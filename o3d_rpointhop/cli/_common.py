@@ -4,9 +4,6 @@ and the model and descriptor a command is given."""
 from __future__ import annotations
 
 import argparse
-import logging
-import warnings
-from collections.abc import Sequence
 
 PROG = "o3d-rpointhop"
 #: The shipped models' names (``descriptors.PRETRAINED_MODELS``, written out so that
@@ -213,71 +210,3 @@ def load_model(name: str | None, n_components: int | None = None):
     if n_components is not None:
         model.set_params(n_components=n_components)
     return model
-
-
-#: Where the commands' warnings go (stderr, unless -q; see ``cli.main``).
-log = logging.getLogger("o3d_rpointhop.cli")
-
-
-def read_noting_precision(path: str, rounded: list[str]):
-    """``io.read_cloud(path)``, with ``path`` added to ``rounded`` (and said in one
-    line) when the file stored coordinates too coarse for the cloud."""
-    from ..io import PrecisionWarning, read_cloud
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", PrecisionWarning)
-        cloud = read_cloud(path)
-    for warning in caught:
-        if issubclass(warning.category, PrecisionWarning):
-            rounded.append(path)
-            log.warning(str(warning.message))
-        else:
-            warnings.warn(warning.message, warning.category, stacklevel=2)
-    return cloud
-
-
-def trust_problems(result, rounded: Sequence[str] = ()) -> list[str]:
-    """Why a converged, unambiguous result is not to be trusted (empty when it is):
-    support under :data:`~o3d_rpointhop.registration.defaults.TRUST_SUPPORT`, or
-    clouds (``rounded``: their files) whose coordinates were rounded when stored."""
-    from ..registration.defaults import TRUST_SUPPORT
-
-    problems = []
-    support = result.support
-    if support is not None and support < TRUST_SUPPORT:
-        problems.append(
-            f"little support: {support:.2%} of the matches agree with the pose, under the "
-            f"{TRUST_SUPPORT:.0%} below which results are most often wrong"
-        )
-    problems += [f"{name} was stored with too little precision to register" for name in rounded]
-    return problems
-
-
-def trust_status(result, problems: Sequence[str]) -> int:
-    """Exit status of a finished registration: 3 when flagged (:func:`flag_status`),
-    else 4 with one warning line per problem when ``problems`` (from
-    :func:`trust_problems`), else 0."""
-    status = flag_status(result)
-    if status != EXIT_OK or not problems:
-        return status
-    for problem in problems:
-        log.warning(f"the result is not to be trusted: {problem}")
-    return EXIT_UNTRUSTED
-
-
-def flag_status(result) -> int:
-    """Exit status of a finished registration: 3, with a warning on stderr, when
-    flagged."""
-    if not result.converged:
-        log.warning(
-            f"the result did not converge (fitness {result.fitness:.3f}): no overlap, or a "
-            "chance alignment"
-        )
-        return EXIT_UNRELIABLE
-    if result.ambiguous:
-        log.warning(
-            "the result is ambiguous: turned by 180 degrees it fits about as well (a "
-            "symmetric shape or a featureless plane)"
-        )
-        return EXIT_UNRELIABLE
-    return EXIT_OK

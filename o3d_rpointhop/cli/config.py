@@ -35,7 +35,8 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..io import check_output_path
-    from ._config import config_of_record, default_config, to_toml
+    from ._config import default_config, to_toml
+    from ._record import config_of_record
 
     config = config_of_record(args.source) if args.source else default_config()
     text = to_toml(config)

@@ -8,7 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import CommandError, add_data, add_json, flag_status
+from ._common import (
+    CommandError,
+    add_data,
+    add_json,
+)
+from ._trust import flag_status
 
 
 def add_parser(commands) -> None:

@@ -16,7 +16,9 @@ from ._common import (
     add_viewpoints,
     check_size,
 )
-from ._config import descriptor_from, load_config, run_record, write_record
+from ._config import load_config
+from ._descriptor import descriptor_from
+from ._record import run_record, write_record
 
 
 def add_parser(commands) -> None:

@@ -7,7 +7,8 @@ import json
 
 import numpy as np
 
-from ._common import add_json, flag_status
+from ._common import add_json
+from ._trust import flag_status
 
 __all__ = ["add_parser", "run"]
 

@@ -6,7 +6,8 @@ import argparse
 import time
 
 from ._common import EXIT_OK, UsageError, add_config, add_viewpoints
-from ._config import estimator_section, load_config, run_record, write_record
+from ._config import estimator_section, load_config
+from ._record import run_record, write_record
 
 
 def _ints(text: str) -> tuple[int, ...]:

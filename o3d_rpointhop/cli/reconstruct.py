@@ -22,10 +22,14 @@ from ._common import (
     check_size,
     cloud_bytes,
     global_points,
-    log,
     positive_or_auto,
 )
-from ._config import descriptor_from, load_config, multiway_options, run_record, used_config
+from ._config import load_config
+from ._descriptor import descriptor_from
+from ._options import multiway_options, used_config
+from ._paths import scan_paths
+from ._record import run_record
+from ._trust import log
 from .view import add_view
 
 
@@ -128,51 +132,6 @@ def add_parser(commands) -> None:
     add_force(p)
     add_view(p)
     p.set_defaults(func=run)
-
-
-def natural_key(path: str) -> tuple:
-    """Sort key of a file name in the order people mean: runs of digits compared as
-    numbers (``scan_9`` before ``scan_10``, ``cloud_bin_3`` before ``cloud_bin_23``),
-    the rest as text, case aside; the name as given breaks what remains tied."""
-    parts = re.split(r"(\d+)", str(path))
-    return [(0, int(p), "") if p.isdigit() else (1, 0, p.casefold()) for p in parts], str(path)
-
-
-def scan_paths(inputs: list[str]) -> list[str]:
-    """The scan files the inputs name: a file as given; a folder, every file in it whose
-    extension ``read_cloud`` reads as points (text tables left out: a folder of scans
-    often holds notes or poses too), in natural order (:func:`natural_key`); a pattern
-    with ``*``, ``?`` or ``[`` that is not a file, the files it matches, in natural
-    order. CommandError for a folder or pattern that names no scan, or a path that
-    does not exist."""
-    import glob
-
-    from ..io import READ_FORMATS
-
-    suffixes = {s for s in READ_FORMATS if s not in (".txt", ".csv")}
-    out = []
-    for item in inputs:
-        path = Path(item)
-        if path.is_dir():
-            found = sorted(
-                (str(p) for p in path.iterdir() if p.is_file() and p.suffix.lower() in suffixes),
-                key=natural_key,
-            )
-            if not found:
-                raise CommandError(
-                    f"{item}: a folder without scan files ({', '.join(sorted(suffixes))})"
-                )
-            out += found
-        elif not path.exists() and any(c in item for c in "*?["):
-            found = sorted((p for p in glob.glob(item) if Path(p).is_file()), key=natural_key)
-            if not found:
-                raise CommandError(f"{item}: no file matches this pattern")
-            out += found
-        elif not path.exists():
-            raise CommandError(f"{item}: no such file or folder")
-        else:
-            out.append(item)
-    return out
 
 
 def _trajectories(paths: list[str], formats: list[str]) -> dict[str, str]:

@@ -22,18 +22,13 @@ from ._common import (
     cloud_bytes,
     global_points,
     positive_or_auto,
-    read_noting_precision,
-    trust_problems,
-    trust_status,
     vector,
 )
-from ._config import (
-    descriptor_from,
-    load_config,
-    registration_options,
-    run_record,
-    used_config,
-)
+from ._config import load_config
+from ._descriptor import descriptor_from
+from ._options import registration_options, used_config
+from ._record import run_record
+from ._trust import read_noting_precision, trust_problems, trust_status
 from .view import add_view
 
 

@@ -447,7 +447,7 @@ def test_register_exits_3_and_says_so_when_the_result_is_ambiguous(tmp_path, cap
 def test_folders_and_patterns_list_scans_in_natural_order(tmp_path):
     """cloud_bin_3 before cloud_bin_23 and scan_9 before scan_10, in a folder and in a
     pattern, as a person numbering files means them (by name, 23 came first)."""
-    from o3d_rpointhop.cli.reconstruct import scan_paths
+    from o3d_rpointhop.cli._paths import scan_paths
 
     names = ["cloud_bin_23.npy", "cloud_bin_3.npy", "cloud_bin_10.npy", "Cloud_bin_4.npy"]
     for name in names:

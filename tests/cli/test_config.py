@@ -137,7 +137,7 @@ def test_bad_settings_get_one_line(tmp_path, monkeypatch, capsys, pair, extra, m
 def test_model_object_runs_what_the_default_runs(capsys, pair):
     """``--model object`` is the default; ``--model X`` is what ``pretrained("X")`` gives,
     registering or describing (``--n-components`` its axes)."""
-    from o3d_rpointhop.cli._config import descriptor_from
+    from o3d_rpointhop.cli._descriptor import descriptor_from
 
     _, _, files = pair
     default = _run(capsys, files)
