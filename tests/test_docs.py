@@ -164,3 +164,11 @@ def test_registration_docs_tables_match_the_code():
     assert set(settings) == set(fields)
     for key, default in settings.items():
         assert eval(default.strip()) == fields[key], key  # noqa: S307
+
+
+def test_the_readme_is_a_five_minute_read():
+    """What it is, the two commands, which model for which data, one short table: the
+    details live in docs/ (docs/results.md holds the full results)."""
+    readme = (ROOT / "README.md").read_text()
+    assert len(readme) < 9000
+    assert readme.count("```sh") == 2  # the quick start's two commands
