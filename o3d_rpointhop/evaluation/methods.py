@@ -152,18 +152,22 @@ def _resolved(options: dict) -> dict:
     return chosen
 
 
-def global_step(kind: str, n_hypotheses: int = 1, **matching) -> Callable[[], Any]:
+def global_step(
+    kind: str, n_hypotheses: int = 1, step: dict | None = None, **matching
+) -> Callable[[], Any]:
     """A factory of fresh global steps (one per pair) named by their public parameters:
-    ``kind`` (``"ransac"`` or ``"consensus"``), ``n_hypotheses`` and the
-    :class:`~o3d_rpointhop.registration.Matcher` parameters ``matching`` (over the
-    step's default matcher). Picklable, so runners can send it to workers."""
-    return partial(_built_step, kind, n_hypotheses, tuple(sorted(matching.items())))
+    ``kind`` (``"ransac"`` or ``"consensus"``), ``n_hypotheses``, the step's other
+    parameters ``step`` and the :class:`~o3d_rpointhop.registration.Matcher` parameters
+    ``matching`` (over the step's default matcher). Picklable, so runners can send it
+    to workers."""
+    own = tuple(sorted({**(step or {}), "n_hypotheses": n_hypotheses}.items()))
+    return partial(_built_step, kind, own, tuple(sorted(matching.items())))
 
 
-def _built_step(kind: str, n_hypotheses: int, matching: tuple) -> Any:
+def _built_step(kind: str, own: tuple, matching: tuple) -> Any:
     step_class = {"ransac": RANSACGlobal, "consensus": ConsensusGlobal}[kind]
     matcher = step_class.default_matcher().set_params(**dict(matching)) if matching else None
-    return step_class(matcher=matcher, n_hypotheses=n_hypotheses)
+    return step_class(matcher=matcher, **dict(own))
 
 
 _SALIENT = {"salient_share": 0.75}
@@ -283,6 +287,27 @@ METHODS = _methods(
             model="scene",
         )
         for cap in (2000, 4000)
+    ),
+    *(
+        Method(
+            f"rpointhop-scene-seeds-{seeds}",
+            f"R-PointHop, shipped scene model, consensus seeded by its {seeds} best-connected "
+            "matches + point-to-plane ICP",
+            _register_with(global_method=global_step("consensus", step={"n_seeds": seeds})),
+            datasets=_SCENES,
+            model="scene",
+        )
+        for seeds in (500, 1000)
+    ),
+    Method(
+        "rpointhop-scene-matches-4000-seeds-1000",
+        "R-PointHop, shipped scene model, consensus on at most 4000 matches seeded by its "
+        "1000 best-connected + point-to-plane ICP",
+        _register_with(
+            global_method=global_step("consensus", step={"n_seeds": 1000}, max_matches=4000)
+        ),
+        datasets=_SCENES,
+        model="scene",
     ),
     Method(
         "rpointhop-scene-verified",

@@ -9,7 +9,7 @@ clouds; :meth:`RegistrationContext.to_world` maps their transformations back.
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import open3d as o3d
@@ -26,7 +26,7 @@ from .prepared import PreparedCloud, describe_global, estimate_normals, prepare_
 from .result import StepResult
 from .settings import RegistrationSettings, resolve_voxel_size
 
-__all__ = ["RegistrationContext", "global_points"]
+__all__ = ["CloudKey", "RegistrationContext", "global_points"]
 
 reg = o3d.pipelines.registration
 
@@ -34,6 +34,18 @@ reg = o3d.pipelines.registration
 _OWN = "own"
 #: The origin of clouds that are centred already.
 _ZERO = np.zeros(3)
+
+
+class CloudKey(NamedTuple):
+    """What a cached cloud of a context is: ``which`` (``"source"`` or ``"target"``), its
+    ``level`` (``"full"`` or ``"global"``) and ``scale`` (resolutions it is downsampled
+    at, and its normals' radius in ``normal_radius``)."""
+
+    which: str
+    level: str
+    scale: float
+
+
 #: Transformations whose nearest target points a context keeps for its evaluations
 #: (the last ones measured: a registration measures a few, multiway one per edge).
 _NEAREST_KEPT = 8
@@ -171,7 +183,8 @@ class RegistrationContext:
                 voxel = max(point_spacing(np.asarray(c.points)) for c in self._global.values())
         self.settings = (settings or RegistrationSettings()).at(voxel)
         self.seed = int(seed)
-        self._normals: dict[tuple, o3d.geometry.PointCloud] = {}
+        self._normals: dict[CloudKey, o3d.geometry.PointCloud] = {}
+        self._downsampled: dict[CloudKey, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
         # Nearest target points of moved sources, by (which, transformation).
         self._nearest: dict[tuple[str, bytes], tuple[float, np.ndarray, np.ndarray]] = {}
@@ -296,14 +309,30 @@ class RegistrationContext:
                 self._features.setdefault(key[:2] + (1,), self._features[key][0])
         return self._features[key]
 
-    def with_normals(self, cloud: o3d.geometry.PointCloud, which: str, radius: float):
-        """``cloud`` with normals: its own if it has them, else estimated (and cached)."""
+    def cloud_at(self, which: str, level: str = "full", scale: float = 1.0):
+        """The source or target (``which``) at a level of detail: as given (``"full"``;
+        with ``scale`` above 1 downsampled at ``scale`` resolutions, computed once) or as
+        the global step sees it (``"global"``)."""
+        if level == "global":
+            return self.global_cloud(which)
+        if scale <= 1.0:
+            return self.cloud(which)
+        key = CloudKey(which, level, float(scale))
+        if key not in self._downsampled:
+            self._downsampled[key] = self.cloud(which).voxel_down_sample(scale * self.voxel_size)
+        return self._downsampled[key]
+
+    def with_normals(self, which: str, level: str = "full", scale: float = 1.0):
+        """:meth:`cloud_at` with normals: its own if it has them, else estimated within
+        ``scale`` times the settings' ``normal_radius``, once per cloud and level (every
+        step that asks for the same cloud shares them)."""
+        cloud = self.cloud_at(which, level, scale)
         if cloud.has_normals():
             return cloud
-        key = (which, round(radius, 12), len(cloud.points))
+        key = CloudKey(which, level, float(scale))
         if key not in self._normals:
             copy = o3d.geometry.PointCloud(cloud)
-            estimate_normals(copy, radius)
+            estimate_normals(copy, scale * self.settings.normal_radius)
             self._normals[key] = copy
         return self._normals[key]
 

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import open3d as o3d
 import pytest
 from helpers import CodesBySize
 
 from o3d_rpointhop import register
 from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.registration import RegistrationContext
+from o3d_rpointhop.registration.prepared import estimate_normals
 
 
 def test_global_points_are_what_register_describes():
@@ -259,3 +262,21 @@ def test_evaluations_are_open3ds_to_the_bit_whatever_the_order():
         seen_partial += 0.0 < got.fitness < 1.0
     assert seen_partial >= 5  # the distances cut through the clouds, not around them
     assert len(context._nearest) <= 8
+
+
+def test_clouds_with_normals_are_cached_by_typed_keys_and_shared():
+    """Every step that asks for the same cloud at the same level gets the same object
+    (estimated once); levels and scales are kept apart, and the radius follows the scale."""
+    cloud = make_object(3000, shape_seed=2)
+    context = RegistrationContext(cloud, cloud + 0.05, voxel_size=0.02)
+    full = context.with_normals("target")
+    assert context.with_normals("target", "full", 1.0) is full and full.has_normals()
+    assert len(full.points) == 3000 and not context.target.has_normals()  # a copy
+    coarse = context.with_normals("target", "full", 3.0)
+    assert coarse is context.with_normals("target", "full", 3)
+    assert len(coarse.points) == len(context.cloud_at("target", "full", 3.0).points) < 3000
+    assert context.cloud_at("target", "full", 3.0) is context.cloud_at("target", "full", 3.0)
+    expected = o3d.geometry.PointCloud(context.cloud_at("target", "full", 3.0))
+    estimate_normals(expected, 3 * context.settings.normal_radius)
+    np.testing.assert_array_equal(np.asarray(coarse.normals), np.asarray(expected.normals))
+    assert context.with_normals("source", "global") is not context.with_normals("target", "global")

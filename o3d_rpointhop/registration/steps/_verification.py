@@ -75,12 +75,8 @@ def verify(
     coarse = context.coarse()
     source = np.asarray(coarse.source.points)
     target = np.asarray(coarse.target.points)
-    radius = context.settings.normal_radius
-    # Under the keys point-to-plane ICP caches the coarse clouds' normals: estimated once.
-    normals = tuple(
-        np.asarray(coarse.with_normals(cloud, f"{which}-full", radius).normals)
-        for cloud, which in ((coarse.source, "source"), (coarse.target, "target"))
-    )
+    # The coarse clouds' normals, shared with point-to-plane ICP on the same context.
+    normals = tuple(np.asarray(coarse.with_normals(w).normals) for w in ("source", "target"))
     grids = (CellGrid(source, distance), CellGrid(target, distance))
     if grids[1].on_cells:
         refined = refine_point_to_plane(source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS)

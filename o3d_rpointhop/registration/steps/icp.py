@@ -270,8 +270,8 @@ class PointToPlaneICP(_ICPStep):
 
     def _solve(self, context, which, distance, init):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
-        source, target = context.clouds(which)
-        target = context.with_normals(target, f"target-{which}", context.settings.normal_radius)
+        source = context.cloud_at("source", which)
+        target = context.with_normals("target", which)
         return _icp(
             self.name,
             source,
@@ -411,19 +411,14 @@ class MultiScaleICP(RegistrationStep):
     def _run_scale(self, context: RegistrationContext, current, scale: float, iters: int):
         """One ICP pass at ``scale`` x ``voxel_size``."""
         voxel = scale * context.voxel_size
-        if scale <= 1.0:
-            src, tgt, tag = context.source, context.target, "full"
-        else:
-            src = context.source.voxel_down_sample(voxel)
-            tgt = context.target.voxel_down_sample(voxel)
-            tag = f"x{scale:g}"
+        src = context.cloud_at("source", "full", scale)  # as given at scale <= 1
+        tgt = context.cloud_at("target", "full", scale)
         distance = self.distance_factor * voxel
         criteria = reg.ICPConvergenceCriteria(1e-6, 1e-6, iters)
         kernel = (
             None if self.method == "point_to_point" else _robust_kernel(self.kernel, None, distance)
         )
         if self.method == "point_to_plane":
-            radius = scale * context.settings.normal_radius
-            tgt = context.with_normals(tgt, f"target{tag}", radius)
+            tgt = context.with_normals("target", "full", scale)
         estimation = _estimation(self.method, kernel)
         return _icp(self.method, src, tgt, distance, current, estimation, criteria)
