@@ -83,7 +83,7 @@ def main() -> None:
                     pair.source,
                     pair.target,
                     model,
-                    seed=args.seed,
+                    random_state=args.seed,
                     global_method=RANSACGlobal(n_hypotheses=3),
                 )
                 errors = pair_errors(result.transformation, pair.truth)

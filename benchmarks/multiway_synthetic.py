@@ -67,7 +67,7 @@ def main(argv=None) -> int:
     }
     for method, descriptor in (("rpointhop", None), ("fpfh", FPFHTransformer())):
         start = time.perf_counter()
-        result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, seed=args.seed)
+        result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, random_state=args.seed)
         seconds = time.perf_counter() - start
         rot, gap = [], []
         for k, pose in enumerate(result.poses):

@@ -105,7 +105,7 @@ def cases(data=None):
                             global_method=g,
                             refine="point_to_plane",
                             n_global_points=2048,
-                            seed=0,
+                            random_state=0,
                         )
                     )
 
@@ -127,26 +127,26 @@ def cases(data=None):
                         global_method="ransac",
                         refine=r,
                         n_global_points=2048,
-                        seed=0,
+                        random_state=0,
                     )
                 )
 
             out.append((f"{name} rpointhop ransac+{refine}", run))
 
         def run_object(s=source, t=target):
-            return _result_digest(register(s, t, objects, global_method="ransac", seed=0))
+            return _result_digest(register(s, t, objects, global_method="ransac", random_state=0))
 
         out.append((f"{name} object-model ransac+point_to_plane", run_object))
 
         def run_scene(s=source, t=target):
-            return _result_digest(register(s, t, scene, global_method="ransac", seed=0))
+            return _result_digest(register(s, t, scene, global_method="ransac", random_state=0))
 
         out.append((f"{name} scene-model ransac+point_to_plane", run_scene))
 
     def run_icp_only():
         s, t = pairs[0][1], pairs[0][2]
         init = np.eye(4)
-        return _result_digest(register(s, t, global_method=None, init=init, seed=0))
+        return _result_digest(register(s, t, global_method=None, init=init, random_state=0))
 
     out.append(("icp from identity", run_icp_only))
 
@@ -165,7 +165,7 @@ def cases(data=None):
         for k in range(4):
             rot = Rotation.random(random_state=200 + k).as_matrix()
             views.append(make_object(1200, shape_seed=77, sample_seed=k) @ rot.T + 0.1 * k)
-        result = register_multiway(views, default, seed=0)
+        result = register_multiway(views, default, random_state=0)
         return _digest(*[p for p in result.poses if p is not None], [len(result.edges)])
 
     out.append(("register_multiway synthetic", run_multiway))

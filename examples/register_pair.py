@@ -56,7 +56,7 @@ pipe = RegistrationPipeline(
         ("coarse", MultiScaleICP()),
         ("fine", PointToPlaneICP(kernel="tukey")),
     ],
-    seed=1,
+    random_state=1,
 )
 pipe.set_params(fine__max_iteration=80)
 report("RegistrationPipeline", pipe.register(source, target).transformation)

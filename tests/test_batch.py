@@ -34,9 +34,9 @@ def test_transform_many_equals_one_by_one_in_order(model, clouds):
 
 def test_register_many_equals_register(clouds):
     pairs = [(c @ np.diag([1.0, -1.0, -1.0]) + 0.2, c) for c in clouds[:2]]
-    alone = [register(s, t, seed=1) for s, t in pairs]
+    alone = [register(s, t, random_state=1) for s, t in pairs]
     for n_jobs in (None, 2):
-        together = register_many(pairs, n_jobs=n_jobs, seed=1)
+        together = register_many(pairs, n_jobs=n_jobs, random_state=1)
         for a, b in zip(alone, together, strict=True):
             np.testing.assert_allclose(a.transformation, b.transformation, rtol=0, atol=1e-12)
             assert a.fitness == pytest.approx(b.fitness, abs=1e-12)
@@ -56,7 +56,7 @@ def test_batch_api_runs_on_a_dask_localcluster(model, clouds):
 
     expected = [model.transform(c) for c in clouds]
     pairs = [(clouds[0] + 0.1, clouds[0])]
-    alone = register(*pairs[0], seed=0)
+    alone = register(*pairs[0], random_state=0)
     with (
         distributed.LocalCluster(
             n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
@@ -65,7 +65,7 @@ def test_batch_api_runs_on_a_dask_localcluster(model, clouds):
     ):
         with parallel_config(backend="dask", n_jobs=-1):
             got = transform_many(model, clouds)
-            results = register_many(pairs, seed=0)
+            results = register_many(pairs, random_state=0)
         # The work really ran on the cluster's workers.
         assert sum(len(v) for v in client.run(lambda: [1]).values()) == 2
         assert client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.task_prefixes)) > 0

@@ -333,7 +333,7 @@ def test_reconstruct_writes_las_on_scan_0_s_grid(tmp_path):
     assert set(np.unique(merged.green).tolist()) == {0, 20000, 40000}
     (vlr,) = [v for v in merged.header.vlrs if (v.user_id, v.record_id) == LAS_RECORD]
     assert json.loads(vlr.record_data)["command"] == "reconstruct"
-    assert read_provenance(out)["config"]["register"]["seed"] == 0
+    assert read_provenance(out)["config"]["register"]["random_state"] == 0
 
 
 def _las_with_attributes(path, points, seed, point_format=3):
@@ -410,7 +410,7 @@ def test_reconstruct_keeps_the_colours_of_the_scans_that_have_them(tmp_path):
         if k != 1:
             cloud.paint_uniform_color([0.1 * (k + 1), 0.2, 0.3])
         clouds.append(cloud)
-    result = register_multiway(clouds, seed=0)
+    result = register_multiway(clouds, random_state=0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         merged = result.merge(clouds, voxel_size=None, colour=False)
@@ -433,7 +433,7 @@ def test_a_mesh_is_built_at_survey_coordinates(tmp_path):
 
     scans, _ = partial_views(3, seed=1)
     far = [scan + OFFSET for scan in scans]
-    result = register_multiway(far, seed=0)
+    result = register_multiway(far, random_state=0)
     mesh = result.mesh(far, depth=6)
     vertices = np.asarray(mesh.vertices)
     assert len(mesh.triangles) > 100

@@ -107,7 +107,7 @@ def test_bad_pose_files_and_poses_are_refused(tmp_path):
 @pytest.fixture(scope="module")
 def multiway():
     scans, _ = partial_views(3, seed=1)
-    return scans, register_multiway(scans, seed=0)
+    return scans, register_multiway(scans, random_state=0)
 
 
 def test_multiway_results_and_pose_graphs_round_trip(tmp_path, multiway):

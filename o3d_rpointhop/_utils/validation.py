@@ -7,6 +7,7 @@ Everything that accepts point clouds goes through :func:`as_points` (one cloud) 
 from __future__ import annotations
 
 import numbers
+import warnings
 from typing import Any
 
 import numpy as np
@@ -18,11 +19,27 @@ __all__ = [
     "as_viewpoints",
     "check_rigid_transformation",
     "coarse_float32",
+    "renamed_seed",
     "PrecisionWarning",
     "is_open3d_cloud",
     "is_positive_number",
     "MAX_COORDINATE",
 ]
+
+
+def renamed_seed(random_state: Any, seed: Any, where: str) -> Any:
+    """``random_state``, or the deprecated ``seed`` when one is given (``None`` and
+    ``"deprecated"`` mean not given), with a ``FutureWarning`` naming ``where``."""
+    if seed is None or (isinstance(seed, str) and seed == "deprecated"):
+        return random_state
+    warnings.warn(
+        f"{where}: 'seed' was renamed 'random_state' (scikit-learn's name); 'seed' will "
+        "be removed in a future release",
+        FutureWarning,
+        stacklevel=3,
+    )
+    return seed
+
 
 #: Largest coordinate accepted: squared distances of larger ones overflow float64.
 MAX_COORDINATE = 1e150

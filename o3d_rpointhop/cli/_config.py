@@ -37,7 +37,7 @@ REGISTER_KEYS = {
     "refine": "point_to_plane",
     "voxel_size": "auto",
     "n_global_points": "auto",
-    "seed": 0,
+    "random_state": 0,
     "symmetry_check": False,
     "viewpoints": None,
     "up": None,
@@ -98,6 +98,11 @@ def default_config() -> dict[str, dict[str, Any]]:
 
 
 def merge(config: dict, defaults: dict, section: str, key: str, value: Any, where: str) -> None:
+    if (section, key) == ("register", "seed"):  # the library's former name
+        from ._trust import log
+
+        log.warning(f"{where}: [register] seed is now random_state (the library's name)")
+        key = "random_state"
     if section not in defaults:
         raise UsageError(f"{where}: unknown section [{section}]; sections: {', '.join(defaults)}")
     if key not in defaults[section]:

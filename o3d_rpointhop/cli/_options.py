@@ -62,7 +62,7 @@ def registration_options(
         "refine": rest or None,
         "voxel_size": register["voxel_size"],
         "n_global_points": register["n_global_points"],
-        "seed": register["seed"],
+        "random_state": register["random_state"],
         "settings": settings,
         "viewpoints": register["viewpoints"],
         "up": register["up"],
@@ -141,7 +141,7 @@ def used_config(
     register: dict[str, Any] = {
         "voxel_size": options["voxel_size"],
         "n_global_points": options["n_global_points"],
-        "seed": options["seed"],
+        "random_state": options["random_state"],
     }
     for key in ("viewpoints", "up"):
         if options.get(key) is not None:

@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
         "global_method": args.global_method,
         "voxel_size": args.voxel_size,
         "n_global_points": args.n_global_points,
-        "seed": args.seed,
+        "random_state": args.seed,
         "viewpoints": args.viewpoints,
         "min_fitness": args.min_fitness,
     }

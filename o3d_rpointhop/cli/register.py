@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         "refine": args.refine,
         "voxel_size": args.voxel_size,
         "n_global_points": args.n_global_points,
-        "seed": args.seed,
+        "random_state": args.seed,
         "symmetry_check": args.symmetry_check,
         "viewpoints": args.viewpoints,
         "up": args.up,

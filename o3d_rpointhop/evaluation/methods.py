@@ -184,7 +184,7 @@ def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     def run(source, target, descriptor, voxel, seed, viewpoints):
         chosen = _resolved(options)
         used = descriptor if describe_with is None else describe_with()
-        return register(source, target, used, seed=seed, viewpoints=viewpoints, **chosen)
+        return register(source, target, used, random_state=seed, viewpoints=viewpoints, **chosen)
 
     run.options = options  # what the records name (provenance)
     run.describe_with = describe_with

@@ -155,7 +155,7 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
                 result = open3d_multiway_recipe(moved, voxel, seed)
             else:
                 descriptor = FPFHTransformer() if method == "fpfh" else None
-                result = register_multiway(moved, descriptor, seed=seed, n_jobs=n_jobs)
+                result = register_multiway(moved, descriptor, random_state=seed, n_jobs=n_jobs)
             rows = []
             # The truth in the frame the result's poses are in (scan 0's unless unplaced).
             into = np.linalg.inv(truth[getattr(result, "frame", 0)])

@@ -16,7 +16,7 @@ import open3d as o3d
 
 from .._utils.geometry import point_spacing
 from .._utils.threads import repeatable_open3d
-from .._utils.validation import as_viewpoints
+from .._utils.validation import as_viewpoints, renamed_seed
 from ..open3d_interop import to_point_cloud
 from ..transforms import from_centred
 from .checks import check_geometry
@@ -68,8 +68,8 @@ class RegistrationContext:
     n_global_points : int or "auto"
         Size the global step aims for when it downsamples; see
         :func:`~o3d_rpointhop.registration.defaults.resolve_global_points`.
-    seed : int
-        Seeds every random choice (RANSAC, FGR, consensus).
+    random_state : int
+        Seeds every random choice (RANSAC, FGR). ``seed``: its former name, deprecated.
     descriptor : transformer or None
         Descriptor used by global steps that do not name their own; ``None``:
         :func:`~o3d_rpointhop.registration.defaults.default_descriptor`, loaded when a
@@ -120,6 +120,8 @@ class RegistrationContext:
         or None when no viewpoints were given.
     up : tuple of ndarray or None
         The source's and the target's unit up vectors, or None.
+    random_state : int
+        The seed of every random choice.
     """
 
     def __init__(
@@ -129,7 +131,7 @@ class RegistrationContext:
         *,
         voxel_size: float | str = "auto",
         n_global_points: int | str = "auto",
-        seed: int = 0,
+        random_state: int = 0,
         descriptor: Any = None,
         check: bool = True,
         settings: RegistrationSettings | None = None,
@@ -137,6 +139,7 @@ class RegistrationContext:
         viewpoints: Any = None,
         up: Any = None,
         origin: Any = None,
+        seed: int | None = None,
     ) -> None:
         self.source = to_point_cloud(source, "source")
         self.target = to_point_cloud(target, "target")
@@ -182,7 +185,7 @@ class RegistrationContext:
             if voxel == "auto":
                 voxel = max(point_spacing(np.asarray(c.points)) for c in self._global.values())
         self.settings = (settings or RegistrationSettings()).at(voxel)
-        self.seed = int(seed)
+        self.random_state = int(renamed_seed(random_state, seed, "RegistrationContext"))
         self._normals: dict[CloudKey, o3d.geometry.PointCloud] = {}
         self._downsampled: dict[CloudKey, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
@@ -256,7 +259,7 @@ class RegistrationContext:
                 self.global_cloud("target"),
                 voxel_size=self.voxel_size,
                 n_global_points=self.n_global_points,
-                seed=self.seed,
+                random_state=self.random_state,
                 descriptor=self.descriptor,
                 check=False,
                 settings=self.settings,

@@ -34,7 +34,7 @@ from sklearn.base import clone
 from .._utils.parallel import parallel_map, single_threaded
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
-from .._utils.validation import as_points, as_viewpoints
+from .._utils.validation import as_points, as_viewpoints, renamed_seed
 from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
@@ -82,7 +82,7 @@ def _pair_context(source, target, prepared_source, prepared_target, settings, se
         source,
         target,
         voxel_size=settings.voxel_size,
-        seed=seed,
+        random_state=seed,
         check=False,
         settings=settings,
         prepared=(prepared_source, prepared_target),
@@ -249,8 +249,9 @@ def _candidates(
         "min_fitness": [Interval(Real, 0, 1, closed="right")],
         "n_jobs": [None, Integral],
         "progress": [None, "boolean"],
-        "seed": [Interval(Integral, 0, None, closed="left")],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
         "settings": [None, RegistrationSettings],
+        "seed": [None, Interval(Integral, 0, None, closed="left")],
         "viewpoints": [None, StrOptions({"origin"}), "array-like"],
     },
     prefer_skip_nested_validation=False,  # the descriptor is the caller's, checked by itself
@@ -266,8 +267,9 @@ def register_multiway(
     min_fitness: float = MIN_EDGE_FITNESS,
     n_jobs: int | None = None,
     progress: bool | None = None,
-    seed: int = 0,
+    random_state: int = 0,
     settings: RegistrationSettings | None = None,
+    seed: int | None = None,
 ) -> MultiwayResult:
     """Poses of unposed scans of one object or scene, in scan 0's frame (or, when scan 0
     overlaps no placed scan, the frame of the placed scan given first).
@@ -310,10 +312,14 @@ def register_multiway(
         ``joblib.parallel_config(backend="dask")``). The result does not depend on it.
     progress : bool, default=None
         A bar on stderr over the pairs (``None``: when stderr is a terminal).
-    seed : int, default=0
+    random_state : int, default=0
+        Seeds every pair's random draws (the same draws for a pair whatever the order
+        the scans are given in).
     settings : RegistrationSettings, default=None
         The multiples of the common resolution (RANSAC, ICP, normals, edges); ``None``
         is ``RegistrationSettings()``.
+    seed : int, default=None
+        The former name of ``random_state``; given, it wins with a ``FutureWarning``.
 
     Returns
     -------
@@ -330,6 +336,7 @@ def register_multiway(
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     views = as_viewpoints(viewpoints, len(points))
     n = len(points)
+    seed = renamed_seed(random_state, seed, "register_multiway")
     # The scans in a canonical order, by content: the same files in any order give the
     # same pairs, in the same directions, and the same poses. canon[c]: the given
     # index of the scan at canonical place c.

@@ -20,7 +20,7 @@ from .._utils.params import (
     StrOptions,
     validate_params,
 )
-from .._utils.validation import check_rigid_transformation
+from .._utils.validation import check_rigid_transformation, renamed_seed
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method
@@ -98,8 +98,11 @@ class RegistrationPipeline(_BaseComposition):
     n_global_points : int or "auto", default="auto"
         ``"auto"``: what the descriptor states in its ``registration_points_`` (4096
         for ``RPointHopTransformer.pretrained("scene")``), else 2048.
-    seed : int, default=0
-        Seeds the random parts (RANSAC, FGR): results are repeatable.
+    random_state : int, default=0
+        Seeds the random parts (RANSAC, FGR): results are repeatable. (An int only:
+        every pair's draws start from it, so a result can be repeated from its record.)
+    seed : int, default="deprecated"
+        The former name of ``random_state``; given, it wins with a ``FutureWarning``.
     settings : RegistrationSettings, default=None
         The multiples of the resolution that distances the steps leave unset are
         derived from; ``None`` is ``RegistrationSettings()``.
@@ -134,7 +137,8 @@ class RegistrationPipeline(_BaseComposition):
         "descriptor": [None, HasMethods(["transform"])],
         "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
-        "seed": [Interval(Integral, 0, None, closed="left")],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
+        "seed": [Interval(Integral, 0, None, closed="left"), StrOptions({"deprecated"})],
         "settings": [None, RegistrationSettings],
         "viewpoints": [None, StrOptions({"origin"}), "array-like"],
         "up": [None, "array-like"],
@@ -147,15 +151,17 @@ class RegistrationPipeline(_BaseComposition):
         descriptor: Any = None,
         voxel_size: float | str = "auto",
         n_global_points: int | str = "auto",
-        seed: int = 0,
+        random_state: int = 0,
         settings: RegistrationSettings | None = None,
         viewpoints: Any = None,
         up: Any = None,
+        seed: int | str = "deprecated",
     ) -> None:
         self.steps = steps
         self.descriptor = descriptor
         self.voxel_size = voxel_size
         self.n_global_points = n_global_points
+        self.random_state = random_state
         self.seed = seed
         self.settings = settings
         self.viewpoints = viewpoints
@@ -278,7 +284,7 @@ class RegistrationPipeline(_BaseComposition):
             target,
             voxel_size=self.voxel_size,
             n_global_points=self.n_global_points,
-            seed=self.seed,
+            random_state=renamed_seed(self.random_state, self.seed, "RegistrationPipeline"),
             descriptor=getattr(self, "descriptor_", self.descriptor),
             settings=self.settings,
             viewpoints=self.viewpoints,
@@ -296,7 +302,7 @@ class RegistrationPipeline(_BaseComposition):
         """Align the clouds of a prepared :class:`RegistrationContext`: the form for a
         caller that prepares clouds once and registers them many times (global clouds
         and descriptors computed once per scan, as :func:`register_multiway` does). The
-        pipeline's ``voxel_size``, ``n_global_points``, ``seed``, ``descriptor`` and
+        pipeline's ``voxel_size``, ``n_global_points``, ``random_state``, ``descriptor`` and
         ``settings`` are the context's own then.
 
         Parameters
@@ -459,13 +465,14 @@ def build_chain(
         "global_method": [StrOptions({*GLOBAL_METHODS, "auto"}), RegistrationStep, None],
         "refine": [StrOptions({*REFINE_METHODS, "none"}), RegistrationStep, list, tuple, None],
         "init": ["array-like", None],
+        "seed": [None, Interval(Integral, 0, None, closed="left")],
         **{
             name: RegistrationPipeline._parameter_constraints[name]
             for name in (
                 "descriptor",
                 "voxel_size",
                 "n_global_points",
-                "seed",
+                "random_state",
                 "settings",
                 "viewpoints",
                 "up",
@@ -484,10 +491,11 @@ def register(
     voxel_size: float | str = "auto",
     n_global_points: int | str = "auto",
     init: np.ndarray | None = None,
-    seed: int = 0,
+    random_state: int = 0,
     settings: RegistrationSettings | None = None,
     viewpoints: Any = None,
     up: Any = None,
+    seed: int | None = None,
 ) -> RegistrationResult:
     """Register ``source`` to ``target``: a global estimate from descriptors, then ICP.
 
@@ -523,7 +531,9 @@ def register(
         3DMatch benchmark's setting), else 2048.
     init : ndarray of shape (4, 4), default=None
         Start for ICP when there is no global step.
-    seed : int, default=0
+    random_state : int, default=0
+        Seeds the random parts (RANSAC's draws, FGR's tuples): the same input and
+        ``random_state`` give the same result.
     settings : RegistrationSettings, default=None
         The multiples of the resolution every unset distance is derived from (RANSAC's
         inlier distance, ICP's passes, the normals' radius, ...); ``None`` is
@@ -534,6 +544,8 @@ def register(
         each in its own cloud's coordinates. Normals and local frames then face the
         sensor, so they repeat between scans (on indoor scans this is worth more than
         any setting; docs/benchmarks.md). ``None``: no sensor is known.
+    seed : int, default=None
+        The former name of ``random_state``; given, it wins with a ``FutureWarning``.
 
     Returns
     -------
@@ -555,7 +567,7 @@ def register(
         descriptor=descriptor,
         voxel_size=voxel_size,
         n_global_points=n_global_points,
-        seed=seed,
+        random_state=renamed_seed(random_state, seed, "register"),
         settings=settings,
         viewpoints=viewpoints,
         up=up,

@@ -173,7 +173,7 @@ def test_outputs_record_their_run_and_config_from_repeats_it(tmp_path, capsys, p
     assert record["descriptor"]["model"] == "scene"
     assert record["descriptor"]["sha256"] == content_hash(RPointHopTransformer.pretrained("scene"))
     config = record["config"]
-    assert config["register"]["seed"] == 4 and config["descriptor"]["model"] == "scene"
+    assert config["register"]["random_state"] == 4 and config["descriptor"]["model"] == "scene"
     # The scene model states the consensus; every step is named with every parameter.
     assert config["register"]["global_method"] == "consensus"
     assert config["settings"]["icp_factors"] == [3.0, 1.0]

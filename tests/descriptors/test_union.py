@@ -318,7 +318,7 @@ def test_register_and_the_consensus_take_a_union(object_model, turns):
         source,
         target,
         union,
-        seed=0,
+        random_state=0,
         global_method=ConsensusGlobal(matcher=consensus_matcher(frame_turns=turns)),
     )
     assert rotation_error_deg(result.transformation[:3, :3], truth[:3, :3]) < 2.0

@@ -94,8 +94,8 @@ def test_register_describes_with_the_object_model_when_given_none():
 
     target = make_object(900, shape_seed=12, sample_seed=1)
     source = make_object(900, shape_seed=12, sample_seed=2) + [0.2, -0.1, 0.3]
-    default = register(source, target, seed=3)
-    named = register(source, target, RPointHopTransformer.pretrained("object"), seed=3)
+    default = register(source, target, random_state=3)
+    named = register(source, target, RPointHopTransformer.pretrained("object"), random_state=3)
     assert default.transformation.tobytes() == named.transformation.tobytes()
     assert default.fitness == named.fitness and default.inlier_rmse == named.inlier_rmse
     context = RegistrationContext(source, target)

@@ -45,10 +45,11 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
         "descriptor",
         "voxel_size",
         "n_global_points",
-        "seed",
+        "random_state",
         "settings",
         "viewpoints",
         "up",
+        "seed",
     }
 
 

@@ -13,7 +13,7 @@ from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
 
 def test_poses_of_a_synthetic_multiscan_object_are_recovered():
     scans, truth = partial_views(4)
-    result = register_multiway(scans, seed=0)
+    result = register_multiway(scans, random_state=0)
     assert result.unconnected == [] and len(result.poses) == 4
     np.testing.assert_array_equal(result.poses[0], np.eye(4))
     for k in range(1, 4):
@@ -29,8 +29,8 @@ def test_a_scan_set_at_survey_coordinates_gives_what_it_gives_at_the_origin():
     once moved back, within rounding; its pose graph is in the scans' own coordinates."""
     scans, truth = partial_views(4, seed=5)
     offset = np.array([500_000.0, 6_000_000.0, 120.0])
-    near = register_multiway(scans, seed=0)
-    far = register_multiway([s + offset for s in scans], seed=0)
+    near = register_multiway(scans, random_state=0)
+    far = register_multiway([s + offset for s in scans], random_state=0)
     assert far.edges == near.edges and far.unconnected == near.unconnected == []
     shift = np.eye(4)
     shift[:3, 3] = offset
@@ -51,11 +51,13 @@ def test_scans_in_a_mix_of_frames_give_what_they_give_in_one():
     scans, truth = partial_views(4, seed=5)
     extent = np.ptp(np.vstack(scans), axis=0).max()
     utm = np.array([452_310.0, 5_211_870.0, 312.0])
-    shared = register_multiway(scans, seed=0)
+    shared = register_multiway(scans, random_state=0)
     assert shared.unconnected == [] and len(shared.edges) >= 3
     for far in (2, 0):
         offsets = [utm if k == far else np.zeros(3) for k in range(4)]
-        mixed = register_multiway([s + o for s, o in zip(scans, offsets, strict=True)], seed=0)
+        mixed = register_multiway(
+            [s + o for s, o in zip(scans, offsets, strict=True)], random_state=0
+        )
         assert mixed.edges == shared.edges and mixed.unconnected == []
 
         def back(pose, to, frm, offsets=offsets):  # from the mixed frames to the shared
@@ -99,8 +101,8 @@ def test_information_matrices_move_with_the_frame():
 def test_parallel_pairs_give_the_same_poses():
     """Screening and refinement spread over processes: the same bytes as in one."""
     scans, _ = partial_views(3, seed=3)
-    one = register_multiway(scans, seed=0)
-    two = register_multiway(scans, seed=0, n_jobs=2)
+    one = register_multiway(scans, random_state=0)
+    two = register_multiway(scans, random_state=0, n_jobs=2)
     assert one.edges == two.edges
     for a, b in zip(one.poses, two.poses, strict=True):
         np.testing.assert_array_equal(a, b)
@@ -109,7 +111,7 @@ def test_parallel_pairs_give_the_same_poses():
 def test_a_scan_of_something_else_is_reported_unconnected():
     scans, truth = partial_views(3, seed=1)
     stranger = make_object(1700, shape_seed=77) * 0.8 + 0.3  # another object entirely
-    result = register_multiway([*scans, stranger], seed=0)
+    result = register_multiway([*scans, stranger], random_state=0)
     assert result.unconnected == [3] and result.poses[3] is None
     assert all((3 not in edge) for edge in result.edges)
     for k in range(1, 3):
@@ -120,7 +122,7 @@ def test_scans_of_different_sizes_and_resolutions():
     scans, truth = partial_views(3, seed=2, n_points=6000)
     scans[1] = scans[1][::3]  # a third of the points: coarser spacing
     scans[2] = np.concatenate([scans[2], scans[2] + 1e-4])  # every point twice
-    result = register_multiway(scans, seed=0)
+    result = register_multiway(scans, random_state=0)
     assert result.unconnected == []
     for k in (1, 2):
         assert rotation_error_deg(result.poses[k], truth[k]) < 3.0
@@ -144,7 +146,7 @@ def test_merging_meshing_and_the_summary_are_library_methods():
     from scipy.spatial import cKDTree
 
     scans, _ = partial_views(3, seed=1)
-    result = register_multiway(scans, seed=0)
+    result = register_multiway(scans, random_state=0)
     merged = result.merge(scans)
     assert merged.has_colors() and len(merged.points) > 1000
     # The merged cloud is the scans placed in scan 0's frame, downsampled.
@@ -187,12 +189,12 @@ def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(
     stated = FPFHTransformer()
     stated.registration_global_method_ = "consensus"
     stated.registration_points_ = 1500
-    result = register_multiway(scans, stated, seed=0)
+    result = register_multiway(scans, stated, random_state=0)
     assert ran == [ConsensusGlobal] * 3 and sizes == [1500]
     for k in (1, 2):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
     ran.clear()
-    register_multiway(scans, FPFHTransformer(), seed=0)
+    register_multiway(scans, FPFHTransformer(), random_state=0)
     assert ran == [RANSACGlobal] * 3
 
 
@@ -204,17 +206,17 @@ def test_the_global_step_and_resolution_can_be_chosen():
     from o3d_rpointhop.registration.steps import RANSACGlobal
 
     scans, truth = partial_views(3, seed=3)
-    auto = register_multiway(scans, seed=0)
-    named = register_multiway(scans, seed=0, global_method="ransac")
+    auto = register_multiway(scans, random_state=0)
+    named = register_multiway(scans, random_state=0, global_method="ransac")
     assert named.edges == auto.edges  # the object model states no step: RANSAC
     for a, b in zip(auto.poses, named.poses, strict=True):
         np.testing.assert_array_equal(a, b)
-    fixed = register_multiway(scans, seed=0, voxel_size=0.05)
+    fixed = register_multiway(scans, random_state=0, voxel_size=0.05)
     assert fixed.voxel_size == 0.05 and auto.voxel_size != 0.05
     for k in range(3):
         assert rotation_error_deg(fixed.poses[k], truth[k]) < 2.0
     starved = register_multiway(
-        scans, seed=0, global_method=RANSACGlobal(max_iteration=1, confidence=0.5)
+        scans, random_state=0, global_method=RANSACGlobal(max_iteration=1, confidence=0.5)
     )
     assert len(starved.edges) < len(auto.edges)
     with pytest.raises(ValueError, match="global_method"):
@@ -254,7 +256,7 @@ def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
     monkeypatch.setattr(multiway, "ALL_PAIRS_UP_TO", 3)
     monkeypatch.setattr(multiway, "RETRIEVED_NEIGHBOURS", 1)
     scans, truth = partial_views(5, seed=2)
-    result = register_multiway(scans, seed=0)
+    result = register_multiway(scans, random_state=0)
     assert {(k, k + 1) for k in range(4)} <= set(result.pairs)
     assert len(result.pairs) < 10
     assert result.unconnected == []
@@ -267,9 +269,9 @@ def test_the_same_scans_in_any_order_give_the_same_room():
     relative poses (each pair is registered in a direction set by the scans' content,
     not by their positions); poses are in the frame of the scan given first."""
     scans, truth = partial_views(4, seed=5)
-    base = register_multiway(scans, seed=0)
+    base = register_multiway(scans, random_state=0)
     for order in ([3, 2, 1, 0], [2, 0, 3, 1]):
-        other = register_multiway([scans[k] for k in order], seed=0)
+        other = register_multiway([scans[k] for k in order], random_state=0)
         assert other.frame == 0 and other.unconnected == []
         back = {(order[i], order[j]) for i, j in other.edges}
         assert {(min(e), max(e)) for e in back} == set(base.edges)
@@ -287,7 +289,7 @@ def test_a_room_is_rooted_in_its_largest_part_not_in_scan_0():
     scan but scan 0 was left out)."""
     scans, truth = partial_views(4, seed=5)
     stranger = make_object(2000, shape_seed=30, sample_seed=1) + 40.0
-    result = register_multiway([stranger, *scans], seed=0)
+    result = register_multiway([stranger, *scans], random_state=0)
     assert result.unconnected == [0] and result.frame == 1
     assert result.parts == [[1, 2, 3, 4], [0]]
     np.testing.assert_array_equal(result.poses[1], np.eye(4))

@@ -48,9 +48,12 @@ def test_register_is_repeatable_and_leaves_inputs_alone(object_model):
     source = make_object(900, shape_seed=701, sample_seed=2) @ random_motion(12)[0].T
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source))
     before = np.asarray(pcd.points).copy()
-    a = register(pcd, target, object_model, seed=3)
+    a = register(pcd, target, object_model, random_state=3)
     b = register(
-        source, o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target)), object_model, seed=3
+        source,
+        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target)),
+        object_model,
+        random_state=3,
     )
     np.testing.assert_array_equal(a.transformation, b.transformation)
     np.testing.assert_array_equal(np.asarray(pcd.points), before)
@@ -102,13 +105,13 @@ def test_register_bad_clouds(object_model, object_target):
 
 def test_pipeline_params_clone_and_validation(object_model):
     pipe = RegistrationPipeline(
-        [("global", RANSACGlobal(max_iteration=1000)), ("icp", PointToPlaneICP())], seed=4
+        [("global", RANSACGlobal(max_iteration=1000)), ("icp", PointToPlaneICP())], random_state=4
     )
     params = pipe.get_params()
-    assert params["global__max_iteration"] == 1000 and params["seed"] == 4
-    pipe.set_params(global__max_iteration=5000, icp__kernel="huber", seed=5)
+    assert params["global__max_iteration"] == 1000 and params["random_state"] == 4
+    pipe.set_params(global__max_iteration=5000, icp__kernel="huber", random_state=5)
     assert pipe.named_steps["global"].max_iteration == 5000
-    assert pipe.named_steps["icp"].kernel == "huber" and pipe.seed == 5
+    assert pipe.named_steps["icp"].kernel == "huber" and pipe.random_state == 5
     pipe.set_params(icp=PointToPointICP())
     assert isinstance(pipe.named_steps["icp"], PointToPointICP)
     copy = clone(pipe)
@@ -188,3 +191,21 @@ def test_every_step_has_one_name():
     context = RegistrationContext(cloud + [0.1, 0.0, 0.0], cloud)
     for name in ("ransac", "svd"):
         assert GLOBAL_METHODS[name]().run(context, np.eye(4)).name == name
+
+
+def test_seed_is_the_former_name_of_random_state(object_model):
+    """``seed`` still works, with a FutureWarning, and gives what ``random_state`` gives."""
+    from o3d_rpointhop import register_multiway
+
+    cloud = make_object(800, shape_seed=3)
+    moved = cloud @ np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]).T + 0.2
+    with pytest.warns(FutureWarning, match="random_state"):
+        old = register(moved, cloud, object_model, seed=3)
+    new = register(moved, cloud, object_model, random_state=3)
+    np.testing.assert_array_equal(old.transformation, new.transformation)
+    pipe = RegistrationPipeline([("global", RANSACGlobal())], descriptor=object_model, seed=3)
+    with pytest.warns(FutureWarning, match="RegistrationPipeline"):
+        piped = pipe.register(moved, cloud)
+    assert piped.steps[0].transformation.shape == (4, 4)
+    with pytest.warns(FutureWarning, match="register_multiway"):
+        register_multiway([cloud, moved], object_model, seed=3)

@@ -98,7 +98,7 @@ def test_a_reconstruction_is_drawn_scan_by_scan(browser):
     from o3d_rpointhop.viewer import show_multiway
 
     scans, _ = partial_views(3, seed=1)
-    result = register_multiway(scans, seed=0)
+    result = register_multiway(scans, random_state=0)
     server = show_multiway(scans, result, port=free_port(), block=False)
     try:
         page = _open(browser, server)
@@ -156,7 +156,7 @@ def test_the_view_command_serves_saved_results_and_transforms(tmp_path, monkeypa
     for k, scan in enumerate(scans):
         np.save(tmp_path / f"scan{k}.npy", scan)
         names.append(str(tmp_path / f"scan{k}.npy"))
-    register_multiway(scans, seed=0).save(tmp_path / "m.json")
+    register_multiway(scans, random_state=0).save(tmp_path / "m.json")
     captured = {}
     monkeypatch.setattr(viewer, "show_multiway", lambda s, r, **kw: captured.update(r=r, s=s, **kw))
     assert main(["view", str(tmp_path / "m.json"), *names, "--port", "8123"]) == 0

@@ -57,7 +57,7 @@ def test_each_scan_is_drawn_where_its_pose_sends_it(drawn):
     from o3d_rpointhop.viewer import show_multiway
 
     scans, _ = partial_views(3, seed=1)
-    result = register_multiway(scans, seed=0)
+    result = register_multiway(scans, random_state=0)
     server = show_multiway(scans, result, port=free_port(), block=False)
     server.stop()
     placed = [k for k, pose in enumerate(result.poses) if pose is not None]
@@ -111,7 +111,7 @@ def test_a_legend_with_distinct_colours_and_scans_named_by_file(drawn, panel):
         assert label in legend and f"rgb{COLOURS[kind]}" in legend, label
     scans, _ = partial_views(3, seed=1)
     names = ["north.las", "east.las", "roof.las"]
-    multiway = register_multiway(scans, seed=0)
+    multiway = register_multiway(scans, random_state=0)
     show_multiway(scans, multiway, port=free_port(), block=False, names=names).stop()
     legend = panel["html"][-1]
     assert all(name in legend for name in names) and "pose graph edges" in legend

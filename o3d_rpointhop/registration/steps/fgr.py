@@ -88,13 +88,13 @@ class FGRGlobal(GlobalStep):
                 np.asarray(context.global_cloud("target").points),
                 pairs,
                 scale=float(self.tuple_scale),
-                seed=context.seed,
+                seed=context.random_state,
             )
         option = reg.FastGlobalRegistrationOption(
             maximum_correspondence_distance=distance, iteration_number=int(self.max_iteration)
         )
         with repeatable_open3d():
-            o3d.utility.random.seed(context.seed)
+            o3d.utility.random.seed(context.random_state)
             result = reg.registration_fgr_based_on_correspondence(
                 context.global_cloud("source"),
                 context.global_cloud("target"),

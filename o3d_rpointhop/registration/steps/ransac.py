@@ -105,7 +105,7 @@ class RANSACGlobal(GlobalStep):
             max_iteration=int(self.max_iteration),
             confidence=float(self.confidence),
             edge_length=float(self.edge_length),
-            seed=context.seed,
+            seed=context.random_state,
             ransac_n=int(self.ransac_n),
             clouds=clouds if self.selection == "fitness" else None,
             upright=None if context.up is None else context.upright,

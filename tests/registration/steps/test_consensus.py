@@ -117,7 +117,7 @@ def test_the_step_caps_its_matches_and_registers_an_object(object_model):
     assert result.steps[0].info["candidate_matches"] == 1000
     assert rotation_error_deg(result.transformation, truth) < 2.0
     assert translation_error(result.transformation, truth) < 0.02
-    by_name = register(source, target, object_model, global_method="consensus", seed=0)
+    by_name = register(source, target, object_model, global_method="consensus", random_state=0)
     assert by_name.steps[0].name == "global" and "hypotheses" in by_name.steps[0].info
 
 

@@ -47,7 +47,7 @@ def test_svd_is_exact_on_a_moved_copy(object_model, object_target):
 @pytest.mark.parametrize("seed", [2, 3])
 def test_ransac_recovers_any_rotation_exactly(object_model, object_target, seed):
     source, truth = moved_copy(object_target, seed, translation_scale=5.0)
-    result = register(source, object_target, object_model, refine=None, seed=seed)
+    result = register(source, object_target, object_model, refine=None, random_state=seed)
     np.testing.assert_allclose(result.transformation, truth, atol=1e-8)
     assert result.fitness == pytest.approx(1.0)
 
