@@ -465,16 +465,12 @@ def _filtered(idx, dist, back, max_distance, max_ratio, top_k, top_k_ratio) -> C
     if max_ratio is not None:
         keep &= ratio <= max_ratio
     chosen = np.flatnonzero(keep)
-    if top_k is not None and chosen.size > top_k:
-        chosen = chosen[np.argsort(d1[chosen], kind="stable")[:top_k]]
-    if top_k_ratio is not None and chosen.size > top_k_ratio:
-        chosen = chosen[np.argsort(ratio[chosen], kind="stable")[:top_k_ratio]]
-    chosen = np.sort(chosen)
-    return Correspondences(
+    kept = Correspondences(
         pairs=np.c_[chosen, nearest[chosen]].astype(np.int64),
         distances=d1[chosen],
         ratios=ratio[chosen],
     )
+    return kept.strongest(top_k, top_k_ratio)
 
 
 def k_best_correspondences(source_features, target_features, k: int) -> Correspondences:

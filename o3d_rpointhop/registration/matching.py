@@ -195,17 +195,19 @@ class Matcher(BaseEstimator):
         dims = 2 if self.frame_turns == 1 else 3
         arrays = []
         for name, value in (("source", source_features), ("target", target_features)):
-            array = as_features(value, f"{name}_features") if dims == 2 else np.asarray(value)
-            if not np.issubdtype(array.dtype, np.floating):
-                array = array.astype(np.float64)
-            if array.ndim != dims or (dims == 3 and array.shape[0] != self.frame_turns):
-                want = "(n, d)" if dims == 2 else f"({self.frame_turns}, n, d)"
-                raise ValueError(
-                    f"{name}_features must be {want} for frame_turns={self.frame_turns}, "
-                    f"got shape {array.shape}"
-                )
-            if not np.isfinite(array).all():
-                raise ValueError(f"{name}_features hold NaN or infinite values")
+            if dims == 2:  # shape, type and finiteness as every match function checks them
+                array = as_features(value, f"{name}_features")
+            else:
+                array = np.asarray(value)
+                if array.ndim != 3 or array.shape[0] != self.frame_turns:
+                    raise ValueError(
+                        f"{name}_features must be ({self.frame_turns}, n, d) for "
+                        f"frame_turns={self.frame_turns}, got shape {array.shape}"
+                    )
+                if not np.issubdtype(array.dtype, np.floating):
+                    array = array.astype(np.float64)
+                if not np.isfinite(array).all():
+                    raise ValueError(f"{name}_features hold NaN or infinite values")
             arrays.append(unit_rows(array) if self.unit else array)
         return self._match(*arrays)
 
