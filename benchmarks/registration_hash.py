@@ -53,7 +53,11 @@ def _room_pair():
     from o3d_rpointhop.datasets import make_room
 
     rot = Rotation.from_euler("z", 25, degrees=True).as_matrix()
-    return "room", make_room(5000, seed=1) @ rot.T + [0.2, 0.1, 0.0], make_room(5000, seed=2)
+    return (
+        "room",
+        make_room(5000, random_state=1) @ rot.T + [0.2, 0.1, 0.0],
+        make_room(5000, random_state=2),
+    )
 
 
 def _real_pairs(data):

@@ -20,7 +20,7 @@ from o3d_rpointhop.transforms import random_rigid_motion, rotation_error_deg
 
 target = make_object(1024, shape_seed=500, sample_seed=1)  # one scan of a new shape
 truth = make_object(1024, shape_seed=500, sample_seed=2)  # another scan of it
-motion = random_rigid_motion(seed=0, max_translation=0.5)
+motion = random_rigid_motion(random_state=0, max_translation=0.5)
 source = truth @ motion[:3, :3].T + motion[:3, 3]  # ... moved somewhere else
 
 # Chance: the share of (source point, random target point) pairs within 0.1.

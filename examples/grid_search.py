@@ -24,7 +24,7 @@ from o3d_rpointhop.transforms import random_rigid_motion
 X, y = [], []
 for k in range(4):
     target = make_object(800, shape_seed=k, sample_seed=1)
-    motion = random_rigid_motion(seed=k)  # rotation uniform over SO(3)
+    motion = random_rigid_motion(random_state=k)  # rotation uniform over SO(3)
     source = make_object(800, shape_seed=k, sample_seed=2) @ motion[:3, :3].T + motion[:3, 3]
     X.append((source, target))
     y.append(np.linalg.inv(motion))  # maps the source back onto the target

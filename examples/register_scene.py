@@ -32,9 +32,9 @@ try:
     name = f"3DMatch {pair.scene} fragments {pair.j} -> {pair.i} ({pair.overlap:.0%} overlap)"
     viewpoints = "origin"
 except (FileNotFoundError, StopIteration):
-    target = make_room(20000, seed=1)
-    motion = random_rigid_motion(seed=3)
-    source = make_room(20000, seed=2) @ motion[:3, :3].T + motion[:3, 3]
+    target = make_room(20000, random_state=1)
+    motion = random_rigid_motion(random_state=3)
+    source = make_room(20000, random_state=2) @ motion[:3, :3].T + motion[:3, 3]
     truth = np.linalg.inv(motion)
     name = "two samplings of a synthetic room"
     viewpoints = (motion[:3, 3], np.zeros(3))  # the room's centre, in each cloud

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ._utils.parallel import parallel_map, single_threaded
+from ._utils.parallel import parallel_map, worker_copy
 from ._utils.params import HasMethods, validate_params
 from ._utils.validation import as_points
 from .registration import register
@@ -63,8 +63,9 @@ def transform_many(
         Sizes may differ. Open3D clouds are read as their points (FPFH then estimates
         normals itself).
     n_jobs : int, default=None
-        Parallel tasks (see :func:`parallel_map`): ``-1`` for every core or every Dask
-        worker.
+        Cores to use: ``None`` every core, one cloud after another on the compiled
+        kernels' threads; an int ``k``, ``k`` joblib tasks of one thread each; ``-1``
+        every core, or every Dask worker.
     progress : bool, default=None
 
     Returns
@@ -72,7 +73,7 @@ def transform_many(
     list of ndarray of shape (n_i, n_features)
     """
     arrays = [as_points(c, f"clouds[{i}]") for i, c in enumerate(clouds)]
-    worker = single_threaded(descriptor)
+    worker = worker_copy(descriptor)
     return parallel_map(
         _describe,
         [(worker, a) for a in arrays],
@@ -114,11 +115,11 @@ def register_many(
         As in :func:`~o3d_rpointhop.register`; ``None`` is its default descriptor, loaded
         once and shipped to the workers.
     n_jobs : int, default=None
-        Parallel tasks (see :func:`parallel_map`).
+        Cores to use, as in :func:`transform_many`, over the pairs.
     progress : bool, default=None
     **options
         Any other keyword of :func:`~o3d_rpointhop.register` (``global_method``,
-        ``refine``, ``voxel_size``, ``seed``, ...).
+        ``refine``, ``voxel_size``, ``random_state``, ...).
 
     Returns
     -------
@@ -132,7 +133,7 @@ def register_many(
         except (TypeError, ValueError):
             raise ValueError(f"pairs[{k}] is not a (source, target) pair") from None
         items.append((as_points(source, f"pairs[{k}][0]"), as_points(target, f"pairs[{k}][1]")))
-    worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
+    worker = worker_copy(descriptor if descriptor is not None else default_descriptor())
     return parallel_map(
         _register,
         [(s, t, worker, options) for s, t in items],

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._utils.validation import renamed_seed
+
 __all__ = [
     "rigid_transform",
     "rigid_transforms",
@@ -179,14 +181,18 @@ def euler_angles_deg(transformation: np.ndarray) -> np.ndarray:
 
 
 def random_rigid_motion(
-    seed: int | np.random.Generator | None = None, max_translation: float = 1.0
+    random_state: int | np.random.Generator | None = None,
+    max_translation: float = 1.0,
+    *,
+    seed: int | np.random.Generator | None = None,
 ) -> np.ndarray:
     """A random rigid motion: rotation uniform over SO(3), translation uniform in the cube
     ``[-max_translation, max_translation]^3``.
 
-    ``seed``: an int (or None) seeds a generator of its own; a ``numpy.random.Generator``
-    is drawn from (one integer that seeds the rotation, then the three translation
-    components), so that a sequence of motions comes from one generator.
+    ``random_state``: an int (or None) seeds a generator of its own; a
+    ``numpy.random.Generator`` is drawn from (one integer that seeds the rotation, then
+    the three translation components), so that a sequence of motions comes from one
+    generator. ``seed`` is its former name (a ``FutureWarning``).
 
     Returns
     -------
@@ -195,13 +201,15 @@ def random_rigid_motion(
     Examples
     --------
     >>> from o3d_rpointhop.transforms import random_rigid_motion
-    >>> motion = random_rigid_motion(seed=0)
+    >>> motion = random_rigid_motion(random_state=0)
     >>> bool(abs(np.linalg.det(motion[:3, :3]) - 1.0) < 1e-12)
     True
     """
     from scipy.spatial.transform import Rotation
 
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    rng = renamed_seed(random_state, seed, "random_rigid_motion")
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(rng)
     motion = np.eye(4)
     motion[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
     motion[:3, 3] = rng.uniform(-max_translation, max_translation, 3)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import re
 import runpy
 import subprocess
@@ -38,6 +39,10 @@ def test_documented_python_runs(document, tmp_path, monkeypatch, request):
     namespace per document (blocks marked as needing the shared data run when it is
     there)."""
     monkeypatch.chdir(tmp_path)
+    # Dask's LocalCluster leaves OMP_NUM_THREADS=1 in this process's environment (its
+    # nannies' pre-spawn-environ), which would put every later test on one thread.
+    environ = dict(os.environ)
+    request.addfinalizer(lambda: (os.environ.clear(), os.environ.update(environ)))
     namespace: dict = {"__name__": "__docs__"}
     ran = 0
     for k, (needs_data, block) in enumerate(_python_blocks(document)):
@@ -64,6 +69,7 @@ GUIDES_WITH_CODE = {
     "consensus.md",
     "datasets.md",
     "descriptors.md",
+    "low_overlap.md",
     "multiway.md",
     "performance.md",
     "registration.md",
@@ -172,3 +178,25 @@ def test_the_readme_is_a_five_minute_read():
     readme = (ROOT / "README.md").read_text()
     assert len(readme) < 9000
     assert readme.count("```sh") == 2  # the quick start's two commands
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_links_between_documents_resolve():
+    """Every relative link of the README and the docs names a document that exists and,
+    with ``#anchor``, one of its headings (sections moved between guides keep their
+    links)."""
+    headings = {
+        doc.name: {_anchor(h) for h in re.findall(r"^#+ (.*)$", doc.read_text(), re.M)}
+        for doc in DOCUMENTS
+    }
+    broken = []
+    for doc in DOCUMENTS:
+        for path, anchor in re.findall(r"\]\(([\w./-]*?\.md)?(?:#([\w-]+))?\)", doc.read_text()):
+            name = Path(path).name if path else doc.name
+            if name not in headings or (anchor and anchor not in headings[name]):
+                broken.append(f"{doc.name}: {path}#{anchor}")
+    assert not broken, broken

@@ -10,7 +10,7 @@ from o3d_rpointhop import (
     rigid_transform,
 )
 from o3d_rpointhop.datasets import make_object
-from o3d_rpointhop.transforms import apply_transform
+from o3d_rpointhop.transforms import apply_transform, random_rigid_motion
 
 
 def motion_matrix(rot, shift):
@@ -121,3 +121,11 @@ def test_from_centred_takes_a_stack_matrix_by_matrix():
     expected = np.stack([from_centred(t, centre) for t in stack])
     np.testing.assert_array_equal(from_centred(stack, centre), expected)
     assert from_centred(np.empty((0, 4, 4)), centre).shape == (0, 4, 4)
+
+
+def test_random_rigid_motion_seed_is_the_former_name_of_random_state():
+    """``seed=`` still gives the motion ``random_state=`` gives, with a FutureWarning."""
+    with pytest.warns(FutureWarning, match="random_rigid_motion"):
+        old = random_rigid_motion(seed=5)
+    np.testing.assert_array_equal(old, random_rigid_motion(random_state=5))
+    assert not np.array_equal(old, random_rigid_motion(random_state=6))

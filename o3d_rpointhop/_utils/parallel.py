@@ -12,7 +12,7 @@ from joblib import Parallel, delayed
 
 from .progress import progress_bar
 
-__all__ = ["parallel_map", "single_threaded", "map_clouds"]
+__all__ = ["parallel_map", "worker_copy", "map_clouds"]
 
 
 def parallel_map(
@@ -54,9 +54,11 @@ def parallel_map(
     return out
 
 
-def single_threaded(estimator: Any) -> Any:
-    """A shallow copy that runs one thread and shows no bar per task (the tasks are the
-    parallelism); the caller's object is left as it is."""
+def worker_copy(estimator: Any) -> Any:
+    """A shallow copy for one task of a joblib map: ``n_jobs=None`` (one thread inside a
+    worker process, where the tasks are the parallelism; every core when the map runs
+    in this process, one task after another) and no bar per task. The caller's object
+    is left as it is."""
     if estimator is None or not hasattr(estimator, "get_params"):
         return estimator
     params = estimator.get_params(deep=False)
@@ -72,8 +74,9 @@ def map_clouds(describe: Callable, clouds: list, kind: str, n_jobs: int | None, 
     """Apply ``describe(cloud, *extras)`` to every cloud and answer in the input's form.
 
     ``describe`` is an estimator's bound method. One cloud runs in this process; several
-    run as ``n_jobs`` joblib tasks (:func:`parallel_map`), each on a one-thread copy of
-    the estimator (:func:`single_threaded`), with a progress bar when the estimator's
+    run as ``n_jobs`` joblib tasks (:func:`parallel_map`), each on a copy of the
+    estimator (:func:`worker_copy`: one thread in a worker process, every core when the
+    tasks run here one after another), with a progress bar when the estimator's
     ``progress`` asks for one. The result is one array for ``kind="single"``, a stacked
     3-D array for ``"batch"`` and a list for ``"list"`` (see
     :func:`~o3d_rpointhop._utils.validation.as_cloud_list`).
@@ -83,7 +86,7 @@ def map_clouds(describe: Callable, clouds: list, kind: str, n_jobs: int | None, 
         out = [describe(*args[0])]
     else:
         owner = describe.__self__
-        worker = getattr(single_threaded(owner), describe.__name__)
+        worker = getattr(worker_copy(owner), describe.__name__)
         out = parallel_map(
             worker,
             args,

@@ -21,7 +21,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import AbstractContextManager, contextmanager
 
 import open3d as o3d
-from joblib import cpu_count, effective_n_jobs
+from joblib import cpu_count, effective_n_jobs, parallel_config
 from joblib.parallel import get_active_backend
 from threadpoolctl import ThreadpoolController
 
@@ -32,6 +32,7 @@ __all__ = [
     "run_blocks",
     "one_blas_thread",
     "repeatable_open3d",
+    "core_budget",
 ]
 
 _CONTROLLER: list[ThreadpoolController] = []
@@ -95,6 +96,24 @@ def repeatable_open3d() -> Iterator[None]:
     o3d.utility.set_max_threads(1)
     try:
         yield
+    finally:
+        o3d.utility.set_max_threads(previous)
+
+
+@contextmanager
+def core_budget(n_jobs: int | None) -> Iterator[None]:
+    """Run the enclosed work on ``n_jobs`` cores: the compiled kernels and joblib tasks
+    of every component whose own ``n_jobs`` is None (``joblib.parallel_config``), and
+    Open3D's threads (normals, k-d tree searches). ``None`` changes nothing: every core,
+    or what an enclosing ``parallel_config`` says; ``-1`` is every core."""
+    if n_jobs is None:
+        yield
+        return
+    previous = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(max(1, min(effective_n_jobs(n_jobs), available_threads())))
+    try:
+        with parallel_config(n_jobs=n_jobs):
+            yield
     finally:
         o3d.utility.set_max_threads(previous)
 

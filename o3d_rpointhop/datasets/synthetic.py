@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._utils.validation import renamed_seed
+
 __all__ = ["make_blob", "make_object"]
 
 
@@ -172,7 +174,9 @@ def make_object(
     return (sample(sample_rng, n_points) - centre) / radius
 
 
-def make_room(n_points: int = 3000, *, seed: int = 0) -> np.ndarray:
+def make_room(
+    n_points: int = 3000, *, random_state: int = 0, seed: int | None = None
+) -> np.ndarray:
     """Sample points from the corner of a room, in metres: a floor, two walls, a table
     top and a box, every piece exactly planar (the worst case for normals and
     eigenvalue features, and what indoor scans are mostly made of).
@@ -180,9 +184,11 @@ def make_room(n_points: int = 3000, *, seed: int = 0) -> np.ndarray:
     Parameters
     ----------
     n_points : int, default=3000
-    seed : int, default=0
+    random_state : int, default=0
         Picks the points; the room is always the same, so two seeds give two samplings
         of one room.
+    seed : int, default=None
+        The former name of ``random_state``; given, it wins with a ``FutureWarning``.
 
     Returns
     -------
@@ -190,7 +196,7 @@ def make_room(n_points: int = 3000, *, seed: int = 0) -> np.ndarray:
     """
     if n_points < 5:
         raise ValueError(f"n_points must be at least 5, got {n_points}")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(renamed_seed(random_state, seed, "make_room"))
     m = n_points // 5
     floor_n = n_points - 4 * m
     floor = np.c_[rng.uniform(0, 4, floor_n), rng.uniform(0, 3, floor_n), np.zeros(floor_n)]

@@ -61,7 +61,9 @@ class FPFHTransformer(BaseDescriptor):
         pipelines do before matching (PointDSC's features). On the training scenes of
         3DMatch it registered fewer pairs (docs/benchmarks.md), so it is off.
     n_jobs : int, default=None
-        Processes over clouds when transforming a list.
+        Cores to use. ``None``: every core, clouds one after another, each on Open3D's
+        threads; an int ``k``: ``k`` joblib processes of one thread each over a list of
+        clouds (one cloud runs on Open3D's threads); ``-1``: every core.
 
     Attributes
     ----------

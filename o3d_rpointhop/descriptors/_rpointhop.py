@@ -110,13 +110,13 @@ class RPointHopTransformer(BaseDescriptor):
         Show a progress bar on stderr (``tqdm``) for long fits and transforms. ``None``:
         only when stderr is a terminal and the job is large.
     n_jobs : int, default=None
-        Parallel workers. Processes over clouds (``fit``, and ``transform`` of several
-        clouds): ``None`` means 1 and ``-1`` all cores, as in scikit-learn. Threads of
-        the compiled passes over one cloud's points: ``None`` means every core, as
-        Open3D's and scikit-learn's compiled code use (within ``OMP_NUM_THREADS``,
-        ``threadpoolctl`` limits and, inside a joblib worker, one thread), an int at
-        most that many. Honoured by joblib's ``parallel_config``, so a Dask cluster can
-        run it. The descriptors are the same bytes on any number of threads.
+        Cores to use. ``None``: every core, clouds one after another, each cloud's
+        compiled passes on threads (within ``OMP_NUM_THREADS``, ``threadpoolctl``
+        limits, ``joblib.parallel_config`` and, inside a joblib worker, one thread). An
+        int ``k``: ``k`` threads over one cloud's points, ``k`` joblib processes of one
+        thread each over several clouds (``fit``, and ``transform`` of a list); ``-1``:
+        every core. Honoured by joblib's ``parallel_config``, so a Dask cluster can run
+        it. The descriptors are the same bytes on any number of cores.
     random_state : int, RandomState instance or None, default=None
         Seeds ``fit_subsample``. Everything else is deterministic: sampling depends on
         the geometry only, so it moves with the cloud.

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
-from joblib import parallel_config
 
+from .._utils.threads import core_budget
 from ..registration import RegistrationResult, RegistrationWarning
 from .methods import METHODS, claimed_by
 
@@ -55,15 +55,8 @@ def current_thread_budget() -> str:
 @contextmanager
 def _budgeted() -> Iterator[None]:
     """This library's kernels (``joblib.parallel_config``) and Open3D on the budget."""
-    one = _BUDGET[0] == "one"
-    previous = o3d.utility.get_max_threads()
-    if one:
-        o3d.utility.set_max_threads(1)
-    try:
-        with parallel_config(n_jobs=1 if one else -1):
-            yield
-    finally:
-        o3d.utility.set_max_threads(previous)
+    with core_budget(1 if _BUDGET[0] == "one" else -1):
+        yield
 
 
 @dataclass(frozen=True)

@@ -29,10 +29,10 @@ from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
-from joblib import effective_n_jobs
 
 from .._utils.compiled import kernel, prange, threads
 from .._utils.params import Interval
+from .._utils.threads import kernel_threads
 from ..registration import ConsensusGlobal, Matcher
 from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
@@ -253,7 +253,8 @@ class SC2PCRGlobal(GlobalStep):
     seed_ratio : float, default=0.2
     first_stage, second_stage : int, default=30, 20
     n_jobs : int, default=None
-        Threads of the compiled kernels (joblib's meaning: ``None`` is one).
+        Threads of the compiled kernels (``None``: every core, as the consensus's; see
+        :class:`~o3d_rpointhop.ConsensusGlobal`); the result does not depend on it.
     """
 
     name = "sc2pcr"
@@ -310,7 +311,7 @@ class SC2PCRGlobal(GlobalStep):
             seed_ratio=self.seed_ratio,
             first_stage=self.first_stage,
             second_stage=self.second_stage,
-            n_threads=max(1, effective_n_jobs(self.n_jobs)),
+            n_threads=kernel_threads(self.n_jobs),
         )
         return self._measured(
             context, self.name, found, self.inlier_threshold, corr, hypotheses=hypotheses

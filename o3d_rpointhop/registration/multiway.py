@@ -31,7 +31,7 @@ import numpy as np
 import open3d as o3d
 from sklearn.base import clone
 
-from .._utils.parallel import parallel_map, single_threaded
+from .._utils.parallel import parallel_map, worker_copy
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints, renamed_seed
@@ -307,9 +307,12 @@ def register_multiway(
         source scan (at the common resolution) within the settings' ``edge_distance``
         (1.5 resolutions) of the target.
     n_jobs : int, default=None
-        Parallel pair registrations, both the screening of candidate pairs and the
-        final refinement of kept edges (joblib; a Dask cluster under
-        ``joblib.parallel_config(backend="dask")``). The result does not depend on it.
+        Cores to use. ``None``: every core, scans and pairs one after another, each on
+        the compiled kernels' threads. An int ``k``: ``k`` joblib processes of one
+        thread each, over the scans' descriptors, the screening of candidate pairs and
+        the refinement of kept edges (a Dask cluster under
+        ``joblib.parallel_config(backend="dask")``); ``-1``: every core. The result does
+        not depend on it.
     progress : bool, default=None
         A bar on stderr over the pairs (``None``: when stderr is a terminal).
     random_state : int, default=0
@@ -350,7 +353,7 @@ def register_multiway(
     centres = [p.mean(axis=0) for p in points]
     points = [p - c for p, c in zip(points, centres, strict=True)]
     views = [None if v is None else v - c for v, c in zip(views, centres, strict=True)]
-    worker = single_threaded(descriptor if descriptor is not None else default_descriptor())
+    worker = worker_copy(descriptor if descriptor is not None else default_descriptor())
     # The screening step, resolved and checked as register() does (copied per pair).
     global_method = build_chain(global_method, None, worker)[0][1]
     if voxel_size == "auto":

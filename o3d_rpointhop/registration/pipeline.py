@@ -20,6 +20,7 @@ from .._utils.params import (
     StrOptions,
     validate_params,
 )
+from .._utils.threads import core_budget
 from .._utils.validation import check_rigid_transformation, renamed_seed
 from .checks import RegistrationWarning
 from .context import RegistrationContext
@@ -117,6 +118,11 @@ class RegistrationPipeline(_BaseComposition):
         each): RANSAC and the consensus reject hypotheses that turn the source upside
         down (its up more than 90 degrees from the target's). For data that has an up
         (a LiDAR's z, a handheld camera's -y); off by default.
+    n_jobs : int, default=None
+        Cores the registration may use: the threads of the compiled kernels and of
+        Open3D's searches, for every step and descriptor whose own ``n_jobs`` is None.
+        ``None``: every core (within an enclosing ``joblib.parallel_config``); ``-1``:
+        every core; the result does not depend on it.
 
     Attributes
     ----------
@@ -142,6 +148,7 @@ class RegistrationPipeline(_BaseComposition):
         "settings": [None, RegistrationSettings],
         "viewpoints": [None, StrOptions({"origin"}), "array-like"],
         "up": [None, "array-like"],
+        "n_jobs": [None, Integral],
     }
 
     def __init__(
@@ -155,6 +162,7 @@ class RegistrationPipeline(_BaseComposition):
         settings: RegistrationSettings | None = None,
         viewpoints: Any = None,
         up: Any = None,
+        n_jobs: int | None = None,
         seed: int | str = "deprecated",
     ) -> None:
         self.steps = steps
@@ -166,6 +174,7 @@ class RegistrationPipeline(_BaseComposition):
         self.settings = settings
         self.viewpoints = viewpoints
         self.up = up
+        self.n_jobs = n_jobs
 
     @property
     def named_steps(self) -> dict[str, RegistrationStep]:
@@ -290,7 +299,8 @@ class RegistrationPipeline(_BaseComposition):
             viewpoints=self.viewpoints,
             up=self.up,
         )
-        return self._run(steps, context, init, start, True, stacklevel)
+        with core_budget(self.n_jobs):
+            return self._run(steps, context, init, start, True, stacklevel)
 
     def run(
         self,
@@ -318,7 +328,8 @@ class RegistrationPipeline(_BaseComposition):
         RegistrationResult
         """
         steps = self._check()
-        return self._run(steps, context, init, time.perf_counter(), assess_ambiguity, 3)
+        with core_budget(self.n_jobs):
+            return self._run(steps, context, init, time.perf_counter(), assess_ambiguity, 3)
 
     def _run(self, steps, context, init, start, ambiguity, stacklevel) -> RegistrationResult:
         """Prepare the clouds, run every step in order on ``context``, then set the
@@ -476,6 +487,7 @@ def build_chain(
                 "settings",
                 "viewpoints",
                 "up",
+                "n_jobs",
             )
         },
     },
@@ -495,6 +507,7 @@ def register(
     settings: RegistrationSettings | None = None,
     viewpoints: Any = None,
     up: Any = None,
+    n_jobs: int | None = None,
     seed: int | None = None,
 ) -> RegistrationResult:
     """Register ``source`` to ``target``: a global estimate from descriptors, then ICP.
@@ -544,6 +557,13 @@ def register(
         each in its own cloud's coordinates. Normals and local frames then face the
         sensor, so they repeat between scans (on indoor scans this is worth more than
         any setting; docs/benchmarks.md). ``None``: no sensor is known.
+    up : None, array-like of shape (3,) or (array-like, array-like), default=None
+        See :class:`RegistrationPipeline`.
+    n_jobs : int, default=None
+        Cores the registration may use: the threads of the compiled kernels and of
+        Open3D's searches, for every step and descriptor whose own ``n_jobs`` is None.
+        ``None``: every core (within an enclosing ``joblib.parallel_config``); ``-1``:
+        every core; the result does not depend on it.
     seed : int, default=None
         The former name of ``random_state``; given, it wins with a ``FutureWarning``.
 
@@ -571,6 +591,7 @@ def register(
         settings=settings,
         viewpoints=viewpoints,
         up=up,
+        n_jobs=n_jobs,
     )
     # validate_params checked the pipeline's parameters; the steps are checked here.
     # The warnings of a flagged result point at register()'s caller.

@@ -17,7 +17,7 @@ SCENE = ("xyz", "normal", "eigen")
 def _room(n: int = 3000, seed: int = 0) -> np.ndarray:
     """A corner of a room, every piece exactly planar (the worst case for eigen
     features and normals)."""
-    return make_room(n, seed=seed)
+    return make_room(n, random_state=seed)
 
 
 @pytest.fixture(scope="module")

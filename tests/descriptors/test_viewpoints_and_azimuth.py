@@ -26,7 +26,7 @@ def azimuth_model() -> RPointHopTransformer:
 
 def _scan(n=900, seed=3):
     """A scan-like cloud: a room's points in front of a sensor at the origin."""
-    return make_room(n, seed=seed) + [1.0, 1.3, 2.5]
+    return make_room(n, random_state=seed) + [1.0, 1.3, 2.5]
 
 
 # ----------------------------------------------------------------------------- frames

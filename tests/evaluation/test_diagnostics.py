@@ -62,7 +62,7 @@ def test_match_inliers_on_a_known_pair():
 def test_pair_diagnostics_see_frames_repeat_with_viewpoints(fitted):
     """A scan and the same scan moved, with its sensor: every frame repeats exactly with
     viewpoints; FPFH reports matches only."""
-    target = make_room(1500, seed=4) + [1.0, 1.3, 2.5]
+    target = make_room(1500, random_state=4) + [1.0, 1.3, 2.5]
     rot, shift = random_motion(3, 2.0)
     source = apply_transform(target, motion_matrix(rot, shift))
     truth = np.linalg.inv(motion_matrix(rot, shift))  # source back onto target

@@ -67,7 +67,7 @@ def test_seeds_are_local_maxima_first():
 
 def test_as_a_step_it_runs_on_the_consensus_matches():
     rng = np.random.default_rng(2)
-    room = make_room(1500, seed=2)
+    room = make_room(1500, random_state=2)
     truth = _truth()
     keep = rng.permutation(1500)[:1400]
     source = apply_transform(room[keep], np.linalg.inv(truth))

@@ -39,7 +39,7 @@ def folder(tmp_path_factory):
     root = tmp_path_factory.mktemp("threedmatch") / "3dmatch"
     for scene, frags in SCENES.items():
         (root / "fragments" / scene).mkdir(parents=True)
-        room = make_room(2500, seed=len(scene))
+        room = make_room(2500, random_state=len(scene))
         for k in frags:
             # Each fragment in its own frame (its sensor at its origin).
             points = apply_transform(room, np.linalg.inv(_pose(k)))

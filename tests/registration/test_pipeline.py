@@ -209,3 +209,25 @@ def test_seed_is_the_former_name_of_random_state(object_model):
     assert piped.steps[0].transformation.shape == (4, 4)
     with pytest.warns(FutureWarning, match="register_multiway"):
         register_multiway([cloud, moved], object_model, seed=3)
+
+
+def test_n_jobs_is_the_cores_of_the_whole_registration(object_model):
+    """``register(n_jobs=1)`` runs the kernels and Open3D on one core, gives the same
+    bytes as every core, and leaves Open3D's thread count as it found it."""
+    import open3d as o3d
+
+    from o3d_rpointhop._utils.threads import core_budget, kernel_threads
+
+    before = o3d.utility.get_max_threads()
+    with core_budget(1):
+        assert kernel_threads(None) == 1
+        assert o3d.utility.get_max_threads() == 1
+    assert o3d.utility.get_max_threads() == before
+    cloud = make_object(800, shape_seed=3)
+    moved = cloud @ np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]).T + 0.2
+    one = register(moved, cloud, object_model, global_method="consensus", n_jobs=1)
+    every = register(moved, cloud, object_model, global_method="consensus")
+    np.testing.assert_array_equal(one.transformation, every.transformation)
+    assert o3d.utility.get_max_threads() == before
+    with pytest.raises(ValueError, match="n_jobs"):
+        register(moved, cloud, object_model, n_jobs=1.5)
