@@ -300,6 +300,16 @@ METHODS = _methods(
         for seeds in (500, 1000)
     ),
     Method(
+        "rpointhop-scene-matches-8000-seeds-5000",
+        "R-PointHop, shipped scene model, consensus on at most 8000 matches seeded by its "
+        "5000 best-connected + point-to-plane ICP",
+        _register_with(
+            global_method=global_step("consensus", step={"n_seeds": 5000}, max_matches=8000)
+        ),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-matches-4000-seeds-1000",
         "R-PointHop, shipped scene model, consensus on at most 4000 matches seeded by its "
         "1000 best-connected + point-to-plane ICP",

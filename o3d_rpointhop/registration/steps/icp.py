@@ -7,7 +7,9 @@ thread), with correspondence distances from the step's parameters or, when they 
 A narrower pass is kept only if it does not lose coverage: when its result brings
 :data:`COVERAGE_DROP` or more of the source fewer points within the previous pass's
 distance than the previous result did, the previous result stands (and is reported at
-that distance). On sparse clouds a
+that distance). Coverage is counted on the global step's clouds when the clouds were
+downsampled for it, so only the last pass and the flags touch the whole clouds. On
+sparse clouds a
 pass narrower than the point spacing finds few correspondences and can walk away from
 an exact start (ModelNet40 resampled pairs: from 0.2-0.4 deg to 6-26 deg).
 """
@@ -164,13 +166,17 @@ class _ICPStep(RegistrationStep):
             result = self._solve(context, which, distance, current)
             moved = np.array(result.transformation)
             if k and distance < distances[k - 1]:
-                # Coverage within the previous pass's distance, before and after this one.
-                before = context.evaluate(current, distances[k - 1], which)
-                after = context.evaluate(moved, distances[k - 1], which)
+                # Coverage within the previous pass's distance, before and after this one,
+                # on the global clouds when there are any: the guard then costs what the
+                # global step costs, and the whole clouds are searched once, for the flags.
+                guard = "global" if context.downsampled else which
+                before = context.evaluate(current, distances[k - 1], guard)
+                after = context.evaluate(moved, distances[k - 1], guard)
                 if after.fitness < before.fitness - COVERAGE_DROP:
-                    # Undone; the result is reported where it was found.
+                    # Undone; the result is reported where it was found, on this pass's
+                    # clouds.
                     undone.append(k)
-                    result = before
+                    result = context.evaluate(current, distances[k - 1], which)
                     continue
             current = moved
         info = {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import open3d as o3d
 import pytest
 from helpers import assert_close_pose, moved_copy, random_motion
 from scipy.spatial.transform import Rotation
@@ -116,6 +117,47 @@ def test_a_narrower_pass_that_loses_coverage_is_undone(object_target, monkeypatc
     assert_close_pose(result.transformation, truth, 0.05, 1e-3)
     assert result.steps[0].distance == calls[0]  # where the kept result was found
     assert result.fitness > 0.9
+
+
+@pytest.mark.filterwarnings("ignore::o3d_rpointhop.RegistrationWarning")
+def test_the_coverage_guard_reads_the_global_clouds_of_downsampled_pairs(monkeypatch):
+    """On clouds downsampled for the global step the guard counts coverage there (no
+    search of the whole clouds but the flags'); an undone pass is still reported on the
+    whole clouds, at the coarse distance."""
+    from o3d_rpointhop.registration.context import RegistrationContext
+
+    cloud = make_object(6000, shape_seed=2)
+    source, truth = moved_copy(cloud, 6, permute=False)
+    solve, evaluate = PointToPlaneICP._solve, RegistrationContext.evaluate
+    calls, levels = [], []
+
+    def wander(self, context, which, distance, init):
+        result = solve(self, context, which, distance, init)
+        calls.append(distance)
+        if len(calls) == 2:  # the fine pass, on the whole clouds: half a unit off
+            away = np.array(result.transformation)
+            away[:3, 3] += [0.5, 0.0, 0.0]
+            result.transformation = away
+        return result
+
+    def spy(self, transformation, distance, which="full"):
+        levels.append(which)
+        return evaluate(self, transformation, distance, which)
+
+    monkeypatch.setattr(PointToPlaneICP, "_solve", wander)
+    monkeypatch.setattr(RegistrationContext, "evaluate", spy)
+    result = register(
+        source, cloud, global_method=None, refine="point_to_plane", init=truth, n_global_points=1500
+    )
+    step = result.steps[0]
+    assert step.info["passes_undone"] == [1]
+    assert levels[:2] == ["global", "global"]  # the guard's before and after
+    assert step.distance == calls[0]
+    clouds = [o3d.geometry.PointCloud(o3d.utility.Vector3dVector(c)) for c in (source, cloud)]
+    whole = o3d.pipelines.registration.evaluate_registration(
+        *clouds, calls[0], result.transformation
+    )
+    assert step.fitness == pytest.approx(whole.fitness, abs=1e-3)
 
 
 def test_passes_that_keep_coverage_are_kept(object_target):
