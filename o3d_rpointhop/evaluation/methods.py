@@ -598,6 +598,20 @@ METHODS = _methods(
         model=None,
         descriptor="fpfh",
     ),
+    *(
+        Method(
+            f"fpfh-pipeline-consensus-icp-4096-matches-{cap}",
+            f"FPFH through this library's consensus on at most {cap} matches + ICP, 4096 "
+            "global points",
+            _fpfh_pipeline(
+                global_method=global_step("consensus", max_matches=cap), n_global_points=4096
+            ),
+            datasets=_SCENES,
+            model=None,
+            descriptor="fpfh",
+        )
+        for cap in (4000, 8000)
+    ),
     Method(
         "fpfh-sc2pcr-icp",
         "FPFH + SC2-PCR (from its paper, on the consensus's matches) + ICP",
