@@ -238,7 +238,7 @@ def moved_part(rng, shape_seed: int, euler_zyx_deg, shift, n_points: int = 600, 
 
 
 def consensus_matcher(**params):
-    """The consensus's default matcher (both ways, at most 8000) with ``params`` changed."""
+    """The consensus's default matcher (both ways, at most 4000) with ``params`` changed."""
     from o3d_rpointhop import ConsensusGlobal
 
     return ConsensusGlobal.default_matcher().set_params(**params)

@@ -36,7 +36,7 @@ def _run(capsys, args) -> dict:
 def test_the_printed_defaults_are_a_config_that_changes_nothing(tmp_path, capsys, pair):
     assert main(["config", "-o", str(tmp_path / "c.toml")]) == 0
     config = tomllib.loads((tmp_path / "c.toml").read_text())
-    assert config["consensus"]["matcher"]["max_matches"] == 8000
+    assert config["consensus"]["matcher"]["max_matches"] == 4000
     assert config["settings"]["icp_factors"] == [2.0, 0.5]
     assert {"register", "ransac", "consensus", "point_to_plane", "settings"} <= set(config)
     _, _, files = pair

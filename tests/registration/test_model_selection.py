@@ -49,6 +49,7 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
         "settings",
         "viewpoints",
         "up",
+        "n_jobs",
         "seed",
     }
 

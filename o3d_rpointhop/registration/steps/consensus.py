@@ -28,7 +28,7 @@ class ConsensusGlobal(GlobalStep):
     """The rigid motion the largest set of mutually consistent matches agrees on.
 
     Matches are the step's matcher's (by default nearest descriptors both ways, at most
-    8000). Two matches are compatible when they keep their length (to within the
+    4000). Two matches are compatible when they keep their length (to within the
     settings' ``consensus_distance``), lie far enough apart to say something about the
     rotation (``span_distance``) and do not share an endpoint: true matches form the
     densest cluster of that graph. The ``n_seeds`` matches compatible with the most
@@ -116,9 +116,11 @@ class ConsensusGlobal(GlobalStep):
 
     @classmethod
     def default_matcher(cls) -> Matcher:
-        """Nearest descriptors both ways, at most 8000 matches spread by index (the
-        graph's two bit matrices then take 16 MB)."""
-        return Matcher(both_directions=True, max_matches=8000)
+        """Nearest descriptors both ways, at most 4000 matches spread by index (the
+        graph's two bit matrices then take 4 MB). Chosen on the scene model's training
+        scenes: 8000 registered as many pairs, with R-PointHop and with FPFH, for a
+        third more time (docs/benchmarks_3dmatch.md)."""
+        return Matcher(both_directions=True, max_matches=4000)
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         settings = context.settings
