@@ -418,10 +418,52 @@ def register_multiway(
     # Rooted in the largest part the edges join, not in whichever scan came first.
     (root, *_), every_part = largest_part(edges, n)
     tree = spanning_tree(edges, n)
+    work = (edges, tree, points, prepared, settings, seed, n_jobs, progress)
+    graph, poses, kept = _reconstruct_part(root, *work)
+    placed = [c for c, p in enumerate(poses) if p is not None]  # the graph's nodes
+    log.info("pose graph: %d edges kept, %d of %d scans placed", len(kept), len(placed), n)
+    # Back in the given order and coordinates, in the frame of the placed scan given
+    # first (scan 0 whenever it is placed).
+    given_poses, frame = _in_given_frame(poses, canon, centres)
+    # Every smaller part of two scans or more is reconstructed the same way, on its own
+    # (as COLMAP returns several models), in the frame of its scan given first.
+    part_poses = [given_poses]
+    for part in every_part[1:]:
+        if len(part) > 1:
+            own = _reconstruct_part(part[0], *work)[1]
+            part_poses.append(_in_given_frame(own, canon, centres)[0])
+        else:
+            alone = [None] * n
+            alone[canon[part[0]]] = np.eye(4)
+            part_poses.append(alone)
+    given_pairs = {}
+    for (i, j), (t, f) in pairs.items():
+        moved = from_centred(t, centres[i], centres[j])  # scan j into scan i
+        a, b = canon[i], canon[j]
+        given_pairs[(a, b) if a < b else (b, a)] = (moved if a < b else np.linalg.inv(moved), f)
+    return MultiwayResult(
+        poses=given_poses,
+        pose_graph=_graph_about(graph, centres, placed, canon, given_poses),
+        pairs=dict(sorted(given_pairs.items())),
+        edges=sorted((min(canon[i], canon[j]), max(canon[i], canon[j])) for i, j in kept),
+        unconnected=sorted(canon[c] for c in range(n) if poses[c] is None),
+        voxel_size=voxel,
+        seconds=time.perf_counter() - start,
+        frame=canon[frame],
+        parts=[sorted(canon[c] for c in part) for part in every_part],
+        part_poses=part_poses,
+    )
+
+
+def _reconstruct_part(root, edges, tree, points, prepared, settings, seed, n_jobs, progress):
+    """Poses of the scans ``edges`` join to scan ``root`` (canonical indices), in its
+    centred frame: along the spanning tree, optimised, every kept edge refined by ICP
+    from them (each keeps the fitness that made it an edge) ending on the full scans,
+    then optimised again. Returns the graph, the poses (None outside the part) and the
+    kept edges."""
+    n = len(points)
     poses = poses_from_tree(tree, edges, n, root)
     graph, poses, kept = optimise(edges, tree, poses, settings, root)
-    # Final refinement: every kept edge again by ICP from the optimised poses (each
-    # keeps the fitness that made it an edge), ending on the full scans.
     normals = {i: _full_normals(points[i], settings) for i in sorted({i for i, _ in kept})}
     results = parallel_map(
         _register_pair,
@@ -450,29 +492,18 @@ def register_multiway(
     if refined:
         tree = [e for e in tree if e in refined]
         graph, poses, kept = optimise(refined, tree, poses, settings, root)
-    placed = [c for c, p in enumerate(poses) if p is not None]  # the graph's nodes
-    log.info("pose graph: %d edges kept, %d of %d scans placed", len(kept), len(placed), n)
-    # Back in the given order and coordinates, in the frame of the placed scan given
-    # first (scan 0 whenever it is placed).
+    return graph, poses, kept
+
+
+def _in_given_frame(poses: list, canon: list[int], centres: list[np.ndarray]):
+    """Canonical, centred poses as the caller gave the scans: in the given order and
+    coordinates, in the frame of the placed scan given first (that one exactly the
+    identity); returns the poses and that scan's canonical index."""
+    placed = [c for c, p in enumerate(poses) if p is not None]
     frame = min(placed, key=lambda c: canon[c])
     into_frame = np.linalg.inv(poses[frame])
-    given_poses: list = [None] * n
+    given: list = [None] * len(poses)
     for c in placed:
-        given_poses[canon[c]] = from_centred(into_frame @ poses[c], centres[frame], centres[c])
-    given_poses[canon[frame]] = np.eye(4)  # exactly, not to rounding
-    given_pairs = {}
-    for (i, j), (t, f) in pairs.items():
-        moved = from_centred(t, centres[i], centres[j])  # scan j into scan i
-        a, b = canon[i], canon[j]
-        given_pairs[(a, b) if a < b else (b, a)] = (moved if a < b else np.linalg.inv(moved), f)
-    return MultiwayResult(
-        poses=given_poses,
-        pose_graph=_graph_about(graph, centres, placed, canon, given_poses),
-        pairs=dict(sorted(given_pairs.items())),
-        edges=sorted((min(canon[i], canon[j]), max(canon[i], canon[j])) for i, j in kept),
-        unconnected=sorted(canon[c] for c in range(n) if poses[c] is None),
-        voxel_size=voxel,
-        seconds=time.perf_counter() - start,
-        frame=canon[frame],
-        parts=[sorted(canon[c] for c in part) for part in every_part],
-    )
+        given[canon[c]] = from_centred(into_frame @ poses[c], centres[frame], centres[c])
+    given[canon[frame]] = np.eye(4)  # exactly, not to rounding
+    return given, frame

@@ -404,6 +404,11 @@ class MultiwayResult:
         The parts the screened pairs join the scans into, each its scans in order: the
         placed one first (the most scans, then the most total edge fitness), then the
         others from the largest down (a scan no pair joins is a part of its own).
+    part_poses : list of list
+        One reconstruction per part, in the order of ``parts``: ``part_poses[p][k]``
+        maps scan ``k`` into the frame of part ``p``'s scan given first (None outside
+        the part). Each smaller part is reconstructed as the placed one is (optimised,
+        refined on the full scans), on its own; ``part_poses[0]`` is ``poses``.
     """
 
     poses: list
@@ -415,6 +420,7 @@ class MultiwayResult:
     seconds: float = 0.0
     frame: int = 0
     parts: list = field(default_factory=list)
+    part_poses: list = field(default_factory=list)
 
     def merge(
         self,
@@ -524,6 +530,7 @@ class MultiwayResult:
             "seconds": self.seconds,
             "frame": self.frame,
             "parts": [list(part) for part in self.parts],
+            "part_poses": self.part_poses,
             "pose_graph": {
                 "nodes": [np.asarray(n.pose) for n in graph.nodes],
                 "edges": [
@@ -572,6 +579,10 @@ class MultiwayResult:
                 seconds=float(body["seconds"]),
                 frame=int(body.get("frame", 0)),
                 parts=[[int(k) for k in part] for part in body.get("parts", [])],
+                part_poses=[
+                    [None if p is None else _matrix(p, (4, 4), f"{path}") for p in part]
+                    for part in body.get("part_poses", [])
+                ],
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None

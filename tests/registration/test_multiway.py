@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import partial_views
+from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import register_multiway
 from o3d_rpointhop.datasets import make_object
+from o3d_rpointhop.registration import MultiwayResult
 from o3d_rpointhop.transforms import apply_transform, rotation_error_deg
 
 
@@ -297,3 +299,28 @@ def test_a_room_is_rooted_in_its_largest_part_not_in_scan_0():
         assert rotation_error_deg(result.poses[k], truth[k - 1]) < 2.0
     summary = result.as_dict(["s", "a", "b", "c", "d"])
     assert summary["frame"] == "a" and summary["parts"] == [["a", "b", "c", "d"], ["s"]]
+
+
+def test_a_smaller_part_is_returned_as_its_own_reconstruction(tmp_path):
+    """Two views of another object, far away, form a part of their own: they are not
+    placed in the room, but reconstructed on their own, in the frame of the first of
+    them, and saved and read back with the result."""
+    scans, truth = partial_views(4, seed=5)
+    # Two samples of another object, far away, the second turned by 40 degrees.
+    turn = np.eye(4)
+    turn[:3, :3] = Rotation.from_euler("z", 40, degrees=True).as_matrix()
+    first = make_object(2000, shape_seed=30, sample_seed=1) + 40.0
+    second = apply_transform(make_object(2000, shape_seed=30, sample_seed=2) + 40.0, turn)
+    result = register_multiway([first, *scans, second], random_state=0)
+    assert result.parts == [[1, 2, 3, 4], [0, 5]]
+    assert result.unconnected == [0, 5] and result.frame == 1
+    np.testing.assert_array_equal(result.part_poses[0][1], result.poses[1])
+    assert len(result.part_poses) == 2
+    sub = result.part_poses[1]
+    assert [k for k, p in enumerate(sub) if p is not None] == [0, 5]
+    np.testing.assert_array_equal(sub[0], np.eye(4))
+    assert rotation_error_deg(sub[5], np.linalg.inv(turn)) < 2.0
+    result.save(tmp_path / "room.json")
+    back = MultiwayResult.load(tmp_path / "room.json")
+    np.testing.assert_allclose(back.part_poses[1][5], sub[5], atol=1e-12)
+    assert back.part_poses[1][1] is None
