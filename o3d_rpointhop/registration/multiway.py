@@ -99,6 +99,7 @@ def _register_pair(
     init=None,
     normals=None,
     global_method="ransac",
+    min_fitness=None,
 ):
     """Scan ``source`` onto scan ``target``: screened from scratch (``init=None``) or
     refined from ``init``.
@@ -114,7 +115,10 @@ def _register_pair(
     edge keeps the fitness that made it one, so neither it nor the flags are measured
     again). ``normals``: the full target scan's normals (:func:`_full_normals`);
     ``global_method``: the screening's global step (a key of ``GLOBAL_METHODS`` or a
-    step, copied)."""
+    step, copied). With ``min_fitness``, a screened pair whose edge fitness falls below
+    it is screened the other way too (target onto source), and that pose, inverted, is
+    kept when it brings more of the source within the edge distance: a pair is not
+    lost to the direction its canonical order gave it."""
     edge = settings.edge_distance
     if init is None:
         source, target = prepared_source.points, prepared_target.points
@@ -123,13 +127,16 @@ def _register_pair(
         target.normals = o3d.utility.Vector3dVector(normals)
     context = _pair_context(source, target, prepared_source, prepared_target, settings, seed)
     if init is None:
-        with warnings.catch_warnings():  # a pair that does not fit is simply no edge
-            warnings.simplefilter("ignore", RegistrationWarning)
-            pipeline = RegistrationPipeline(_pair_steps(settings, True, global_method))
-            result = pipeline.run(context, None, assess_ambiguity=False)
-        transformation = result.transformation
+        transformation, fitness = _screened(context, settings, global_method)
+        if min_fitness is not None and fitness < min_fitness:
+            back = _pair_context(target, source, prepared_target, prepared_source, settings, seed)
+            turned, back_fitness = _screened(back, settings, global_method)
+            if back_fitness > 0.0:
+                candidate = np.linalg.inv(turned)
+                forward = context.evaluate(context.to_local(candidate), edge).fitness
+                if forward > fitness:
+                    transformation, fitness = candidate, forward
         local = context.to_local(transformation)
-        fitness = context.evaluate(local, edge).fitness if result.converged else 0.0
     else:
         ((_, step),) = _pair_steps(settings, screen=False)
         local = step.run(context, context.to_local(np.asarray(init, dtype=np.float64)))
@@ -139,6 +146,19 @@ def _register_pair(
         information = reg.get_information_matrix_from_point_clouds(*context.clouds(), edge, local)
     # In the coordinates the scans were given in, as the pose graph's edges are.
     return transformation, fitness, information_about(np.asarray(information), context.origin)
+
+
+def _screened(context, settings, global_method) -> tuple[np.ndarray, float]:
+    """A candidate pair screened on its prepared clouds: the transformation (in the
+    caller's coordinates) and its edge fitness (0 unless the result converged)."""
+    with warnings.catch_warnings():  # a pair that does not fit is simply no edge
+        warnings.simplefilter("ignore", RegistrationWarning)
+        pipeline = RegistrationPipeline(_pair_steps(settings, True, global_method))
+        result = pipeline.run(context, None, assess_ambiguity=False)
+    local = context.to_local(result.transformation)
+    edge = settings.edge_distance
+    fitness = context.evaluate(local, edge).fitness if result.converged else 0.0
+    return result.transformation, fitness
 
 
 def information_about(information: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -399,6 +419,7 @@ def register_multiway(
         _register_pair,
         [
             (None, None, prepared[j], prepared[i], settings, seed, None, None, global_method)
+            + (min_fitness,)
             for i, j in candidates
         ],
         n_jobs=n_jobs,
