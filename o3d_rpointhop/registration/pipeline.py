@@ -288,18 +288,18 @@ class RegistrationPipeline(_BaseComposition):
 
     def _register(self, steps, source, target, init, stacklevel: int = 4) -> RegistrationResult:
         start = time.perf_counter()
-        context = RegistrationContext(
-            source,
-            target,
-            voxel_size=self.voxel_size,
-            n_global_points=self.n_global_points,
-            random_state=renamed_seed(self.random_state, self.seed, "RegistrationPipeline"),
-            descriptor=getattr(self, "descriptor_", self.descriptor),
-            settings=self.settings,
-            viewpoints=self.viewpoints,
-            up=self.up,
-        )
-        with core_budget(self.n_jobs):
+        with core_budget(self.n_jobs):  # the context's spacing searches too
+            context = RegistrationContext(
+                source,
+                target,
+                voxel_size=self.voxel_size,
+                n_global_points=self.n_global_points,
+                random_state=renamed_seed(self.random_state, self.seed, "RegistrationPipeline"),
+                descriptor=getattr(self, "descriptor_", self.descriptor),
+                settings=self.settings,
+                viewpoints=self.viewpoints,
+                up=self.up,
+            )
             return self._run(steps, context, init, start, True, stacklevel)
 
     def run(
