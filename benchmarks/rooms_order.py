@@ -1,0 +1,172 @@
+"""Rooms from their fragments in five orders: does the order the files come in matter?
+
+For every chosen 3DMatch scene, every fragment in its folder is given to
+``register_multiway`` in five orders: by fragment number, reversed, and three seeded
+shuffles. Each reconstruction is scored on the scene's ground-truth pairs (``gt.log`` of
+3DMatch and 3DLoMatch, both fragments present): a pair counts when the relative pose of
+its two fragments passes the official test (``gt.info`` RMSE below 0.2 m). Reported per
+scene: the pairs counted and the fragments placed in each order, their spread, and the
+largest difference between two orders in the relative pose of one pair of placed
+fragments (which is zero when the order does not matter). One method per run, the scene
+model facing the sensors unless ``--model`` says otherwise.
+
+Writes ``rooms_order.json`` (and ``rooms_order_timings.json``, the times apart) to
+``--output``::
+
+    python benchmarks/rooms_order.py --scenes hotel1,lab_hj [--model scene] [--n-jobs 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+
+from o3d_rpointhop import RPointHopTransformer, register_multiway
+from o3d_rpointhop.datasets import read_gt_info, read_gt_log
+from o3d_rpointhop.datasets.threedmatch import threedmatch_root
+from o3d_rpointhop.evaluation._common import machine_facts
+from o3d_rpointhop.evaluation.metrics import rmse_3dmatch
+from o3d_rpointhop.evaluation.provenance import descriptor_provenance
+from o3d_rpointhop.evaluation.report import split_timings
+from o3d_rpointhop.io import read_cloud
+from o3d_rpointhop.transforms import rotation_error_deg
+
+RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+#: The official registration test: gt.info RMSE below this, in metres.
+RECALL_RMSE = 0.2
+#: Seeds of the three shuffled orders.
+SHUFFLES = (0, 1, 2)
+
+
+def orders(n: int) -> dict[str, list[int]]:
+    """The five orders of ``n`` fragments: by number, reversed, three seeded shuffles."""
+    found = {"by number": list(range(n)), "reversed": list(range(n))[::-1]}
+    for seed in SHUFFLES:
+        found[f"shuffle {seed}"] = [int(k) for k in np.random.default_rng(seed).permutation(n)]
+    return found
+
+
+def scene_data(root: Path, scene: str):
+    """The scene's fragment ids (by number), their points, and its ground-truth pairs
+    ``(i, j) -> (truth, information)`` whose two fragments are present."""
+    folder = root / "fragments" / scene
+    ids = sorted(int(p.stem.split("_")[-1]) for p in folder.glob("cloud_bin_*.ply"))
+    points = [np.asarray(read_cloud(folder / f"cloud_bin_{k}.ply").points) for k in ids]
+    truth = {}
+    for bench in ("3DMatch", "3DLoMatch"):
+        gt = root / "benchmarks" / bench / scene
+        if not (gt / "gt.log").is_file():
+            continue
+        info = read_gt_info(gt / "gt.info")
+        for pair, matrix in read_gt_log(gt / "gt.log").items():
+            if pair[0] in ids and pair[1] in ids and pair in info:
+                truth[pair] = (matrix, info[pair])
+    return ids, points, truth
+
+
+def relative(poses: dict[int, np.ndarray], i: int, j: int) -> np.ndarray | None:
+    """Fragment ``j`` into fragment ``i``'s frame, when both are placed."""
+    if poses.get(i) is None or poses.get(j) is None:
+        return None
+    return np.linalg.inv(poses[i]) @ poses[j]
+
+
+def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed) -> dict:
+    ids, points, truth = scene_data(root, scene)
+    runs, poses_by_order = {}, {}
+    for name, order in orders(len(ids)).items():
+        start = time.perf_counter()
+        result = register_multiway(
+            [points[k] for k in order],
+            descriptor,
+            viewpoints=viewpoints,
+            n_jobs=n_jobs,
+            random_state=seed,
+            progress=False,
+        )
+        seconds = time.perf_counter() - start
+        poses = {ids[k]: result.poses[place] for place, k in enumerate(order)}
+        counted = 0
+        for (i, j), (matrix, information) in truth.items():
+            estimate = relative(poses, i, j)
+            counted += (
+                estimate is not None and rmse_3dmatch(estimate, matrix, information) < RECALL_RMSE
+            )
+        runs[name] = {
+            "gt_pairs_registered": int(counted),
+            "placed": sum(p is not None for p in poses.values()),
+            "seconds": round(seconds, 1),
+        }
+        poses_by_order[name] = poses
+        print(scene, name, json.dumps(runs[name]), flush=True)
+    # The largest difference between two orders in one pair's relative pose.
+    worst_rot, worst_shift = 0.0, 0.0
+    for a, b in combinations(poses_by_order.values(), 2):
+        for i, j in combinations(ids, 2):
+            x, y = relative(a, i, j), relative(b, i, j)
+            if x is None or y is None:
+                continue
+            worst_rot = max(worst_rot, rotation_error_deg(x, y))
+            worst_shift = max(worst_shift, float(np.linalg.norm(x[:3, 3] - y[:3, 3])))
+    counts = [r["gt_pairs_registered"] for r in runs.values()]
+    return {
+        "fragments": len(ids),
+        "gt_pairs": len(truth),
+        "orders": runs,
+        "min": min(counts),
+        "max": max(counts),
+        "spread": max(counts) - min(counts),
+        "largest_pose_difference_deg": round(worst_rot, 4),
+        "largest_pose_difference_m": round(worst_shift, 5),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default=None, help="data folder (default: data_home())")
+    parser.add_argument("--scenes", required=True, help="comma-separated scene names or parts")
+    parser.add_argument("--model", default="scene", help="a shipped model name")
+    parser.add_argument("--viewpoints", choices=("origin", "none"), default="origin")
+    parser.add_argument("--n-jobs", type=int, default=-1)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--output", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    root = threedmatch_root(args.data)
+    wanted = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    scenes = [
+        p.name for p in sorted((root / "fragments").iterdir()) if any(w in p.name for w in wanted)
+    ]
+    if not scenes:
+        parser.error(f"no scene matches {wanted}")
+    descriptor = RPointHopTransformer.pretrained(args.model)
+    viewpoints = None if args.viewpoints == "none" else "origin"
+    out = {
+        "settings": {
+            "model": args.model,
+            "viewpoints": args.viewpoints,
+            "seed": args.seed,
+            "orders": "by number, reversed, shuffles " + ", ".join(map(str, SHUFFLES)),
+            "recall_rmse": RECALL_RMSE,
+            "machine": machine_facts()["machine"],
+        },
+        "scenes": {},
+    }
+    for scene in scenes:
+        out["scenes"][scene] = run_scene(
+            root, scene, descriptor, viewpoints, args.n_jobs, args.seed
+        )
+    out["provenance"] = descriptor_provenance({f"rpointhop-{args.model}": descriptor})
+    kept, timed = split_timings(out)
+    args.output.mkdir(parents=True, exist_ok=True)
+    (args.output / "rooms_order.json").write_text(json.dumps(kept, indent=1) + "\n")
+    (args.output / "rooms_order_timings.json").write_text(json.dumps(timed, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
