@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from ._utils.geometry import vectors
 from ._utils.validation import PrecisionWarning, as_points, coarse_float32
 
 log = logging.getLogger(__name__)
@@ -154,11 +155,11 @@ def _optional(module: str, suffix: str):
 
 
 def _cloud(points, colors=None, normals=None) -> o3d.geometry.PointCloud:
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud = o3d.geometry.PointCloud(vectors(points))
     if colors is not None:
-        cloud.colors = o3d.utility.Vector3dVector(np.clip(colors, 0.0, 1.0))
+        cloud.colors = vectors(np.clip(colors, 0.0, 1.0))
     if normals is not None:
-        cloud.normals = o3d.utility.Vector3dVector(normals)
+        cloud.normals = vectors(normals)
     return cloud
 
 
@@ -450,7 +451,7 @@ def _read_cloud(path: str | os.PathLike, mesh_points: int) -> o3d.geometry.Point
         points = as_points(arr, name=str(path))
         if arr.dtype == np.float32:
             _warn_if_coarse(arr, path, depth=1)
-        return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        return o3d.geometry.PointCloud(vectors(points))
     raise ValueError(
         f"{path}: unknown point cloud format {suffix!r}; use one of {', '.join(READ_FORMATS)}"
     )
@@ -481,7 +482,7 @@ LAS_RECORD = ("o3d-rpointhop", 1)
 def _as_open3d(cloud) -> o3d.geometry.PointCloud:
     if isinstance(cloud, o3d.geometry.PointCloud):
         return cloud
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(as_points(cloud)))
+    return o3d.geometry.PointCloud(vectors(as_points(cloud)))
 
 
 def _las_grid(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from ._utils.geometry import vectors
 from ._utils.validation import as_points, is_open3d_cloud
 
 __all__ = ["to_open3d_feature", "to_point_cloud"]
@@ -50,4 +51,4 @@ def to_point_cloud(cloud: Any, name: str = "cloud") -> o3d.geometry.PointCloud:
         legacy = cloud.to_legacy()
         as_points(legacy, name)
         return legacy
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(as_points(cloud, name)))
+    return o3d.geometry.PointCloud(vectors(as_points(cloud, name)))

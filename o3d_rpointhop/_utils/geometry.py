@@ -5,7 +5,17 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 
-__all__ = ["point_spacing"]
+__all__ = ["point_spacing", "vectors"]
+
+
+def vectors(array) -> o3d.utility.Vector3dVector:
+    """``array`` (n, 3) as Open3D's ``Vector3dVector`` (a copy), read-only arrays too:
+    Open3D refuses those, and joblib hands its workers large arrays as read-only
+    memory maps."""
+    array = np.asarray(array, dtype=np.float64)
+    if not array.flags.writeable:
+        array = array.copy()
+    return o3d.utility.Vector3dVector(array)
 
 
 def point_spacing(points: np.ndarray) -> float:
@@ -16,7 +26,7 @@ def point_spacing(points: np.ndarray) -> float:
     ValueError
         If every point coincides.
     """
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud = o3d.geometry.PointCloud(vectors(points))
     dist = np.asarray(cloud.compute_nearest_neighbor_distance())
     positive = dist[dist > 0]
     if positive.size == 0:

@@ -9,7 +9,7 @@ import numpy as np
 import open3d as o3d
 from sklearn.base import _fit_context, clone
 
-from .._utils.geometry import point_spacing
+from .._utils.geometry import point_spacing, vectors
 from .._utils.params import Interval, StrOptions
 from .._utils.validation import as_cloud_list, as_viewpoints, is_open3d_cloud
 from ._base import BaseDescriptor
@@ -175,9 +175,9 @@ class FPFHTransformer(BaseDescriptor):
             radius = FEATURE_RADIUS_FACTOR * spacing if radius == "auto" else radius
             if normal_radius == "auto":
                 normal_radius = NORMAL_RADIUS_FACTOR * spacing
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        cloud = o3d.geometry.PointCloud(vectors(points))
         if normals is not None:
-            cloud.normals = o3d.utility.Vector3dVector(normals)
+            cloud.normals = vectors(normals)
         else:
             cloud.estimate_normals(
                 o3d.geometry.KDTreeSearchParamHybrid(

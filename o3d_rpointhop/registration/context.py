@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import open3d as o3d
 
-from .._utils.geometry import point_spacing
+from .._utils.geometry import point_spacing, vectors
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_viewpoints, renamed_seed
 from ..open3d_interop import to_point_cloud
@@ -430,7 +430,7 @@ def _as_open3d(scan: PreparedCloud, what: str) -> o3d.geometry.PointCloud:
     """A prepared cloud's points (and normals) as an Open3D cloud."""
     cloud = to_point_cloud(scan.points, what)
     if scan.normals is not None:
-        cloud.normals = o3d.utility.Vector3dVector(scan.normals)
+        cloud.normals = vectors(scan.normals)
     return cloud
 
 

@@ -31,6 +31,7 @@ import numpy as np
 import open3d as o3d
 from sklearn.base import clone
 
+from .._utils.geometry import vectors
 from .._utils.parallel import parallel_map, worker_copy
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
@@ -123,8 +124,8 @@ def _register_pair(
     if init is None:
         source, target = prepared_source.points, prepared_target.points
     elif normals is not None:
-        target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target))
-        target.normals = o3d.utility.Vector3dVector(normals)
+        target = o3d.geometry.PointCloud(vectors(target))
+        target.normals = vectors(normals)
     context = _pair_context(source, target, prepared_source, prepared_target, settings, seed)
     if init is None:
         transformation, fitness = _screened(context, settings, global_method)
@@ -208,7 +209,7 @@ def _full_normals(points: np.ndarray, settings: RegistrationSettings) -> np.ndar
     """A full scan's normals as a pair's context estimates them for its target (in the
     frame centred on the scan's centroid, :func:`~.prepared.estimate_normals` at the
     settings' normal radius): estimated once per scan instead of once per edge."""
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud = o3d.geometry.PointCloud(vectors(points))
     cloud.translate(-cloud.get_center())
     estimate_normals(cloud, settings.normal_radius)
     return np.asarray(cloud.normals).copy()

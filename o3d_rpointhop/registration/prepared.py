@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from .._utils.geometry import vectors
 from ..descriptors._base import call_with_viewpoints
 
 __all__ = [
@@ -161,7 +162,7 @@ def prepare_cloud(
     if isinstance(points, o3d.geometry.PointCloud):
         cloud = o3d.geometry.PointCloud(points)
     else:
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points)))
+        cloud = o3d.geometry.PointCloud(vectors(np.asarray(points)))
     origin = np.zeros(3)
     if downsample:
         origin = np.asarray(cloud.points).mean(axis=0) if centre is None else np.asarray(centre)
