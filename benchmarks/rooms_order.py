@@ -76,7 +76,7 @@ def relative(poses: dict[int, np.ndarray], i: int, j: int) -> np.ndarray | None:
     return np.linalg.inv(poses[i]) @ poses[j]
 
 
-def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed) -> dict:
+def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed, sequential=True) -> dict:
     ids, points, truth = scene_data(root, scene)
     runs, poses_by_order = {}, {}
     for name, order in orders(len(ids)).items():
@@ -88,6 +88,7 @@ def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed) -> dict:
             n_jobs=n_jobs,
             random_state=seed,
             progress=False,
+            sequential=sequential,
         )
         seconds = time.perf_counter() - start
         poses = {ids[k]: result.poses[place] for place, k in enumerate(order)}
@@ -133,6 +134,12 @@ def main(argv=None) -> int:
     parser.add_argument("--model", default="scene", help="a shipped model name")
     parser.add_argument("--viewpoints", choices=("origin", "none"), default="origin")
     parser.add_argument("--n-jobs", type=int, default=-1)
+    parser.add_argument(
+        "--sequential",
+        choices=("yes", "no"),
+        default="yes",
+        help="pair each fragment with those given next to it (register_multiway's sequential)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
@@ -149,6 +156,7 @@ def main(argv=None) -> int:
         "settings": {
             "model": args.model,
             "viewpoints": args.viewpoints,
+            "sequential": args.sequential,
             "seed": args.seed,
             "orders": "by number, reversed, shuffles " + ", ".join(map(str, SHUFFLES)),
             "recall_rmse": RECALL_RMSE,

@@ -243,8 +243,8 @@ def _candidates(
     features: list[np.ndarray], k: int, sequence: list[int] | None = None
 ) -> list[tuple[int, int]]:
     """All pairs of a few scans; for many, each scan's ``k`` nearest by its pooled
-    (mean, unit-length) descriptor, plus its neighbours in ``sequence`` (the scans in
-    the order they were given, which may follow an acquisition; default: as indexed)."""
+    (mean, unit-length) descriptor, plus, with ``sequence`` (the scans in the order of
+    their acquisition), each scan's neighbours in it."""
     n = len(features)
     if n <= ALL_PAIRS_UP_TO:
         return [(i, j) for i in range(n) for j in range(i + 1, n)]
@@ -252,7 +252,7 @@ def _candidates(
     pooled /= np.linalg.norm(pooled, axis=1, keepdims=True) + 1e-12
     distance = np.linalg.norm(pooled[:, None] - pooled[None], axis=2)
     np.fill_diagonal(distance, np.inf)
-    sequence = list(range(n)) if sequence is None else sequence
+    sequence = sequence or []
     pairs = {(min(a, b), max(a, b)) for a, b in zip(sequence, sequence[1:], strict=False)}
     for i in range(n):
         for j in np.argsort(distance[i], kind="stable")[:k]:
@@ -274,6 +274,7 @@ def _candidates(
         "settings": [None, RegistrationSettings],
         "seed": [None, Interval(Integral, 0, None, closed="left")],
         "viewpoints": [None, StrOptions({"origin"}), "array-like"],
+        "sequential": ["boolean"],
     },
     prefer_skip_nested_validation=False,  # the descriptor is the caller's, checked by itself
 )
@@ -290,6 +291,7 @@ def register_multiway(
     progress: bool | None = None,
     random_state: int = 0,
     settings: RegistrationSettings | None = None,
+    sequential: bool = True,
     seed: int | None = None,
 ) -> MultiwayResult:
     """Poses of unposed scans of one object or scene, in scan 0's frame (or, when scan 0
@@ -342,6 +344,12 @@ def register_multiway(
     settings : RegistrationSettings, default=None
         The multiples of the common resolution (RANSAC, ICP, normals, edges); ``None``
         is ``RegistrationSettings()``.
+    sequential : bool, default=True
+        The scans were given in the order they were taken: with more than 12 scans,
+        each is also paired with the scans given next to it (besides its nearest by
+        pooled descriptor), so the pairs screened, and with them the result, then
+        depend on that order. ``False``: the same scans in any order give the same
+        result.
     seed : int, default=None
         The former name of ``random_state``; given, it wins with a ``FutureWarning``.
 
@@ -408,7 +416,8 @@ def register_multiway(
         ) from exc
     features = [p.features for p in prepared]
     place = {k: c for c, k in enumerate(canon)}
-    candidates = _candidates(features, RETRIEVED_NEIGHBOURS, [place[k] for k in range(n)])
+    sequence = [place[k] for k in range(n)] if sequential else None
+    candidates = _candidates(features, RETRIEVED_NEIGHBOURS, sequence)
     log.info(
         "%d scans prepared at resolution %.4g; screening %d candidate pairs with %s",
         len(points),

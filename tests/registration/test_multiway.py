@@ -239,9 +239,11 @@ def test_many_scans_pair_each_with_its_nearest_by_pooled_descriptor_and_its_neig
     features = [np.tile(codes[k % 7], (50, 1)) for k in range(n)]
     chain = {(k, k + 1) for k in range(n - 1)}
     twins = {(k, k + 7) for k in range(7)}
-    assert _candidates(features, 1) == sorted(chain | twins)
+    assert _candidates(features, 1, list(range(n))) == sorted(chain | twins)
+    # Without a sequence, the retrieved pairs alone.
+    assert _candidates(features, 1) == sorted(twins)
     # More neighbours retrieved: a superset, still each pair once, smaller index first.
-    wider = _candidates(features, 3)
+    wider = _candidates(features, 3, list(range(n)))
     assert set(wider) > chain | twins and len(wider) == len(set(wider))
     assert all(i < j for i, j in wider) and len(wider) < n * (n - 1) // 2
     # Up to the threshold, every pair.
