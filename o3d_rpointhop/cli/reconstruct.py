@@ -112,6 +112,12 @@ def add_parser(commands) -> None:
         help="share of a scan within 1.5 resolutions of the other for a pair to become an "
         "edge (default 0.3; [multiway] min_fitness)",
     )
+    p.add_argument(
+        "--sequential",
+        action="store_true",
+        help="the scans are given in the order they were taken: above 12 scans, pair each "
+        "with those given next to it too (the result then depends on their order)",
+    )
     add_config(p)
     p.add_argument(
         "--output-voxel-size",
@@ -167,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
         "min_fitness": args.min_fitness,
     }
     options = multiway_options(config, flags, descriptor)
+    options["sequential"] = args.sequential
     used = used_config(options, section, {"multiway": {"min_fitness": options["min_fitness"]}})
     record = run_record("reconstruct", used, descriptor)
     trajectories = _trajectories(args.trajectory or [], args.trajectory_format or [])

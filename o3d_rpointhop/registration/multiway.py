@@ -291,7 +291,7 @@ def register_multiway(
     progress: bool | None = None,
     random_state: int = 0,
     settings: RegistrationSettings | None = None,
-    sequential: bool = True,
+    sequential: bool = False,
     seed: int | None = None,
 ) -> MultiwayResult:
     """Poses of unposed scans of one object or scene, in scan 0's frame (or, when scan 0
@@ -344,12 +344,13 @@ def register_multiway(
     settings : RegistrationSettings, default=None
         The multiples of the common resolution (RANSAC, ICP, normals, edges); ``None``
         is ``RegistrationSettings()``.
-    sequential : bool, default=True
+    sequential : bool, default=False
         The scans were given in the order they were taken: with more than 12 scans,
         each is also paired with the scans given next to it (besides its nearest by
-        pooled descriptor), so the pairs screened, and with them the result, then
-        depend on that order. ``False``: the same scans in any order give the same
-        result.
+        pooled descriptor), so the pairs screened, and with them the result, depend on
+        that order. ``False``: the same scans in any order give the same result. (On
+        the scene model's training scenes above 12 fragments, the pairs the sequence
+        added placed no more ground-truth pairs: benchmarks/rooms_order.py.)
     seed : int, default=None
         The former name of ``random_state``; given, it wins with a ``FutureWarning``.
 

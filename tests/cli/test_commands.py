@@ -465,3 +465,27 @@ def test_folders_and_patterns_list_scans_in_natural_order(tmp_path):
         "scan_10.npy",
         "scan_100.npy",
     ]
+
+
+def test_reconstruct_sequential_reaches_register_multiway(tmp_path, monkeypatch):
+    """--sequential says the scans come in acquisition order; without it the order of
+    the files does not matter (register_multiway's default)."""
+    from o3d_rpointhop import registration
+    from o3d_rpointhop.cli import EXIT_OK
+
+    real, seen = registration.register_multiway, []
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("sequential"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(registration, "register_multiway", spy)
+    scans, _ = partial_views(3, seed=3)
+    names = []
+    for k, scan in enumerate(scans):
+        np.save(tmp_path / f"s{k}.npy", scan)
+        names.append(str(tmp_path / f"s{k}.npy"))
+    out = ["-o", str(tmp_path / "m.ply"), "--n-jobs", "1"]
+    assert main(["reconstruct", *names, *out]) == EXIT_OK
+    assert main(["reconstruct", *names, *out, "--sequential", "--force"]) == EXIT_OK
+    assert seen == [False, True]

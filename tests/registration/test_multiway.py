@@ -261,7 +261,7 @@ def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
     monkeypatch.setattr(multiway, "ALL_PAIRS_UP_TO", 3)
     monkeypatch.setattr(multiway, "RETRIEVED_NEIGHBOURS", 1)
     scans, truth = partial_views(5, seed=2)
-    result = register_multiway(scans, random_state=0)
+    result = register_multiway(scans, random_state=0, sequential=True)
     assert {(k, k + 1) for k in range(4)} <= set(result.pairs)
     assert len(result.pairs) < 10
     assert result.unconnected == []
@@ -269,14 +269,23 @@ def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
 
 
-def test_the_same_scans_in_any_order_give_the_same_room():
+@pytest.mark.parametrize("retrieved", [False, True])
+def test_the_same_scans_in_any_order_give_the_same_room(retrieved, monkeypatch):
     """Shuffled and reversed, the same scans give the same placed set, edges and
     relative poses (each pair is registered in a direction set by the scans' content,
-    not by their positions); poses are in the frame of the scan given first."""
+    not by their positions); poses are in the frame of the scan given first. Also when
+    the candidate pairs are retrieved (the all-pairs threshold lowered): by default no
+    pair comes from the given order."""
+    from o3d_rpointhop.registration import multiway
+
+    if retrieved:
+        monkeypatch.setattr(multiway, "ALL_PAIRS_UP_TO", 3)
+        monkeypatch.setattr(multiway, "RETRIEVED_NEIGHBOURS", 1)
     scans, truth = partial_views(4, seed=5)
     base = register_multiway(scans, random_state=0)
     for order in ([3, 2, 1, 0], [2, 0, 3, 1]):
         other = register_multiway([scans[k] for k in order], random_state=0)
+        assert {tuple(sorted((order[i], order[j]))) for i, j in other.pairs} == set(base.pairs)
         assert other.frame == 0 and other.unconnected == []
         back = {(order[i], order[j]) for i, j in other.edges}
         assert {(min(e), max(e)) for e in back} == set(base.edges)
