@@ -76,7 +76,7 @@ def relative(poses: dict[int, np.ndarray], i: int, j: int) -> np.ndarray | None:
     return np.linalg.inv(poses[i]) @ poses[j]
 
 
-def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed, sequential=True) -> dict:
+def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed, sequential=False) -> dict:
     ids, points, truth = scene_data(root, scene)
     runs, poses_by_order = {}, {}
     for name, order in orders(len(ids)).items():
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--sequential",
         choices=("yes", "no"),
-        default="yes",
+        default="no",
         help="pair each fragment with those given next to it (register_multiway's sequential)",
     )
     parser.add_argument("--seed", type=int, default=0)
@@ -164,9 +164,10 @@ def main(argv=None) -> int:
         },
         "scenes": {},
     }
+    sequential = args.sequential == "yes"
     for scene in scenes:
         out["scenes"][scene] = run_scene(
-            root, scene, descriptor, viewpoints, args.n_jobs, args.seed
+            root, scene, descriptor, viewpoints, args.n_jobs, args.seed, sequential
         )
     out["provenance"] = descriptor_provenance({f"rpointhop-{args.model}": descriptor})
     kept, timed = split_timings(out)
