@@ -15,7 +15,9 @@ optimised poses are refined once more (every kept edge re-registered by
 ``register()``'s ICP from them, ending on the full scans, then optimised again). The
 scans are worked on in a canonical order by content, so their given order changes
 nothing; the graph is rooted in the largest part its edges join, and scans outside it
-are reported as unconnected and get no pose.
+are reported as unconnected and get no pose there (each smaller part is reconstructed
+on its own, ``MultiwayResult.part_poses``). A candidate pair that fails its screening
+one way is screened the other way too.
 """
 
 from __future__ import annotations
