@@ -87,6 +87,16 @@ TURN = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg 
 SMALL = dict(n_neighbors=(16, 16), hop_sizes=(1.0, 0.5), lrf_neighbors=32)
 
 
+def benchmark_script(name: str):
+    """``benchmarks/<name>.py`` loaded as a module (the scripts are not a package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def motion_matrix(rot: np.ndarray, shift: np.ndarray) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3] = rot

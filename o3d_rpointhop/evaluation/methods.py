@@ -299,25 +299,18 @@ METHODS = _methods(
         )
         for seeds in (500, 1000)
     ),
-    Method(
-        "rpointhop-scene-matches-8000-seeds-5000",
-        "R-PointHop, shipped scene model, consensus on at most 8000 matches seeded by its "
-        "5000 best-connected + point-to-plane ICP",
-        _register_with(
-            global_method=global_step("consensus", step={"n_seeds": 5000}, max_matches=8000)
-        ),
-        datasets=_SCENES,
-        model="scene",
-    ),
-    Method(
-        "rpointhop-scene-matches-4000-seeds-1000",
-        "R-PointHop, shipped scene model, consensus on at most 4000 matches seeded by its "
-        "1000 best-connected + point-to-plane ICP",
-        _register_with(
-            global_method=global_step("consensus", step={"n_seeds": 1000}, max_matches=4000)
-        ),
-        datasets=_SCENES,
-        model="scene",
+    *(
+        Method(
+            f"rpointhop-scene-matches-{cap}-seeds-{seeds}",
+            f"R-PointHop, shipped scene model, consensus on at most {cap} matches seeded by its "
+            f"{seeds} best-connected + point-to-plane ICP",
+            _register_with(
+                global_method=global_step("consensus", step={"n_seeds": seeds}, max_matches=cap)
+            ),
+            datasets=_SCENES,
+            model="scene",
+        )
+        for cap, seeds in ((8000, 5000), (4000, 1000))
     ),
     Method(
         "rpointhop-scene-verified",

@@ -2,25 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 import pytest
-from helpers import partial_views
+from helpers import benchmark_script, partial_views
 
 from o3d_rpointhop.registration.defaults import default_descriptor
-
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "rooms_order.py"
 
 
 @pytest.fixture(scope="module")
 def rooms_order():
-    spec = importlib.util.spec_from_file_location("rooms_order", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_script("rooms_order")
 
 
 def _write_records(path: Path, records: dict) -> None:
