@@ -137,27 +137,42 @@ def vector(text: str) -> list[float]:
 
 
 def _viewpoints(text: str):
-    """``--viewpoints``: ``origin``, or one or more positions ``x,y,z`` separated by
-    ``;`` (one per cloud, in that cloud's coordinates)."""
-    if text == "origin":
+    """``--viewpoints``: ``auto``, ``origin``, ``none``, or one or more positions
+    ``x,y,z`` separated by ``;`` (one per cloud, in that cloud's coordinates)."""
+    if text in ("auto", "origin", "none"):
         return text
     views = [_xyz(part) for part in text.split(";")]
     if any(v is None for v in views):
         raise argparse.ArgumentTypeError(
-            f"expected 'origin' or positions 'x,y,z;x,y,z', got {text!r}"
+            f"expected 'auto', 'origin', 'none' or positions 'x,y,z;x,y,z', got {text!r}"
         )
     return views
 
 
-def add_viewpoints(parser: argparse.ArgumentParser, clouds: str) -> None:
-    """``--viewpoints``: where the sensors stood."""
+def _given_viewpoints(text: str):
+    """``--viewpoints`` of a command that chooses no model: ``auto`` is refused and
+    ``none`` is None."""
+    views = _viewpoints(text)
+    if views == "auto":
+        raise argparse.ArgumentTypeError("'auto' applies to register and reconstruct")
+    return None if views == "none" else views
+
+
+def add_viewpoints(parser: argparse.ArgumentParser, clouds: str, chosen: bool = False) -> None:
+    """``--viewpoints``: where the sensors stood; ``chosen``: the command chooses them
+    with the model (``auto``, its default)."""
+    where = (
+        "where the sensors stood: 'origin' (every cloud is in its sensor's frame: depth "
+        f"images, LiDAR sweeps, 3DMatch fragments), 'x,y,z;...', one per {clouds}, in its "
+        "own coordinates (normals and local frames then face the sensor), 'none' (no sensor "
+        "known)"
+    )
+    if chosen:
+        where += " or 'auto' (the default: chosen with the model when --model is auto, else none)"
+    else:
+        where += " (the default)"
     parser.add_argument(
-        "--viewpoints",
-        type=_viewpoints,
-        help="where the sensors stood: 'origin' (every cloud is in its sensor's frame: "
-        f"depth images, LiDAR sweeps, 3DMatch fragments) or 'x,y,z;...', one per {clouds}, "
-        "in its own coordinates; normals and local frames then face the sensor (default: "
-        "none known)",
+        "--viewpoints", type=_viewpoints if chosen else _given_viewpoints, help=where
     )
 
 

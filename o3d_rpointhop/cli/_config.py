@@ -39,7 +39,7 @@ REGISTER_KEYS = {
     "n_global_points": "auto",
     "random_state": 0,
     "symmetry_check": False,
-    "viewpoints": None,
+    "viewpoints": "auto",
     "up": None,
 }
 #: ``[descriptor]``: which descriptor a command describes with (``model``: a shipped

@@ -10,7 +10,7 @@ from typing import Any
 from ._common import DESCRIPTORS, CommandError, UsageError
 from ._config import DESCRIPTOR_KEYS, estimator_section
 
-__all__ = ["descriptor_from"]
+__all__ = ["chosen_descriptor", "descriptor_from"]
 
 
 def descriptor_from(
@@ -28,9 +28,10 @@ def descriptor_from(
     win over ``[descriptor]``; ``[fpfh]`` configures FPFH. ``"rpointhop+fpfh"``: the
     model and FPFH side by side (:class:`~o3d_rpointhop.DescriptorUnion`), FPFH weighing
     ``fpfh_weight`` (:data:`~o3d_rpointhop.registration.defaults.SCENE_FPFH_WEIGHT`
-    unless given). ``None`` as the descriptor
-    leaves the choice to the library (its default descriptor), unless axes or threads
-    are set, which then apply to that default. A model named by ``--model`` is what
+    unless given). ``None`` as the descriptor leaves the choice to the library
+    (:func:`chosen_descriptor`, from the clouds: ``--model auto``, the default of
+    ``register`` and ``reconstruct``), unless axes are set, which then apply to the
+    object model. A model named by ``--model`` is what
     ``RPointHopTransformer.pretrained(name)`` gives (``--n-components`` its
     ``n_components``); with ``registering`` off (``describe``) the default is the
     paper's model.
@@ -67,8 +68,13 @@ def descriptor_from(
         except ValueError as exc:
             raise UsageError(f"[descriptor]: {exc}") from None
         return union, {**section, "fpfh": estimator_section(fpfh)}
-    unset = (section["model"], section["n_components"], section["n_jobs"]) == (None,) * 3
-    if registering and unset:
+    if section["model"] == "auto":
+        if not registering:
+            raise UsageError("--model auto applies to register and reconstruct")
+        if section["n_components"] is not None:
+            raise UsageError("--n-components applies to a named model, not --model auto")
+        return None, section
+    if registering and (section["model"], section["n_components"]) == (None, None):
         return None, section
     return _rpointhop_from(section, registering), section
 
@@ -106,3 +112,23 @@ def _rpointhop_from(section: dict[str, Any], registering: bool) -> Any:
             raise
         raise UsageError(f"[descriptor]: {exc}") from None
     return descriptor
+
+
+def chosen_descriptor(
+    section: dict[str, Any], viewpoints: Any, clouds: list[Any], names: list[str]
+) -> tuple[Any, str | list, dict[str, Any]]:
+    """The shipped model and viewpoints ``register(descriptor="auto")`` would use for
+    ``clouds`` (a command whose model was left to the library: ``descriptor_from``
+    gave None), on ``[descriptor]``'s threads; the viewpoints as the ``--viewpoints``
+    flag says them (``"none"`` for no sensor), and the choice, JSON-ready."""
+    from ..registration.model_choice import resolve_model
+    from ._trust import log
+
+    try:
+        descriptor, views, choice = resolve_model("auto", viewpoints, clouds, names)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    if section.get("n_jobs") is not None:
+        descriptor = descriptor.set_params(n_jobs=section["n_jobs"])
+    log.info("model: %s, viewpoints %s (%s)", choice.model, views, choice.reason)
+    return descriptor, "none" if views is None else views, choice.as_dict()

@@ -9,7 +9,7 @@ from typing import Any
 from ._common import UsageError
 from ._config import OBJECT_PARAMETERS, REGISTER_KEYS, settings_section, step_classes
 
-__all__ = ["multiway_options", "registration_options", "used_config"]
+__all__ = ["multiway_options", "reconstruct_options", "registration_options", "used_config"]
 
 
 def registration_options(
@@ -64,9 +64,18 @@ def registration_options(
         "n_global_points": register["n_global_points"],
         "random_state": register["random_state"],
         "settings": settings,
-        "viewpoints": register["viewpoints"],
+        "viewpoints": _viewpoints(register["viewpoints"], descriptor),
         "up": register["up"],
     }
+
+
+def _viewpoints(given: Any, descriptor: Any) -> Any:
+    """``[register] viewpoints`` as ``register()`` takes them: ``"none"`` is None, and
+    ``"auto"`` stays only while the model is left to be chosen (``descriptor`` None);
+    with a model given it means no sensor, as in ``register()``."""
+    if given == "none" or (given == "auto" and descriptor is not None):
+        return None
+    return given
 
 
 def _with_matchers(config: dict[str, dict]) -> dict[str, dict]:
@@ -143,9 +152,10 @@ def used_config(
         "n_global_points": options["n_global_points"],
         "random_state": options["random_state"],
     }
-    for key in ("viewpoints", "up"):
-        if options.get(key) is not None:
-            register[key] = options[key]
+    views = options.get("viewpoints")
+    register["viewpoints"] = "none" if views is None else views  # None: no sensor known
+    if options.get("up") is not None:
+        register["up"] = options["up"]
     step = options["global_method"]
     if step is None:
         register["global_method"] = "none"
@@ -176,3 +186,15 @@ def used_config(
     if "fpfh" in descriptor_section:
         config["fpfh"] = descriptor_section["fpfh"]
     return config
+
+
+def reconstruct_options(
+    config: dict[str, dict], flags: dict[str, Any], descriptor: Any, section: dict, sequential: bool
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``reconstruct``'s ``register_multiway()`` keyword arguments
+    (:func:`multiway_options` and ``sequential``), and the record of its run."""
+    from ._record import run_record
+
+    options = {**multiway_options(config, flags, descriptor), "sequential": sequential}
+    used = used_config(options, section, {"multiway": {"min_fitness": options["min_fitness"]}})
+    return options, run_record("reconstruct", used, descriptor)

@@ -23,9 +23,12 @@ def add_parser(commands) -> None:
         "<output>/<dataset>.json, .md and .png. ModelNet40 protocols: "
         f"{', '.join(MODELNET40_PROTOCOLS)}; bunny: {', '.join(BUNNY_PROTOCOLS)}; "
         f"multiway: {', '.join(OBJECTS)} (every scan from an unknown pose, rebuilt with "
-        "register_multiway)."
+        "register_multiway); rooms: every 3DMatch scene of the data folder rebuilt from its "
+        "unposed fragments (--scenes to choose), against Open3D's multiway recipe."
     )
-    p.add_argument("dataset", choices=[*DATASETS, "multiway"], help="what to run the methods on")
+    p.add_argument(
+        "dataset", choices=[*DATASETS, "multiway", "rooms"], help="what to run the methods on"
+    )
     p.add_argument("--protocol", nargs="+", help="protocols to run (default: all)")
     p.add_argument(
         "--methods",
@@ -89,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.dataset == "multiway":
         return _multiway(args)
+    if args.dataset == "rooms":
+        return _rooms(args)
     if args.rotate and args.dataset != "3dmatch":
         raise CommandError("--rotate applies to 3dmatch (the object protocols rotate already)")
     if args.dataset != "3dmatch" and (args.with_consecutive or args.viewpoints != "origin"):
@@ -157,4 +162,25 @@ def _multiway(args: argparse.Namespace) -> int:
     files = write_split(run.results, folder, "multiway", markdown, timings_markdown)
     print(markdown(run.results))
     print("written: " + ", ".join([*files, *written]))
+    return EXIT_OK
+
+
+def _rooms(args: argparse.Namespace) -> int:
+    from ..evaluation.provenance import rooms_provenance
+    from ..evaluation.report import write_split
+    from ..evaluation.rooms import ROOM_METHODS, markdown, run_rooms, timings_markdown
+
+    methods = tuple(args.methods.split(",")) if args.methods else tuple(ROOM_METHODS)
+    scenes = args.scenes.split(",") if args.scenes else None
+    try:
+        results = run_rooms(scenes, methods, data=args.data, seed=args.seed, n_jobs=args.n_jobs)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    results["provenance"] = rooms_provenance(methods)
+    folder = Path(args.output)
+    folder.mkdir(parents=True, exist_ok=True)
+    files = write_split(results, folder, "rooms", markdown, timings_markdown)
+    print(markdown(results))
+    print(timings_markdown(results))
+    print("written: " + ", ".join(files))
     return EXIT_OK

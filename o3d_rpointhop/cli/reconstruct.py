@@ -25,10 +25,9 @@ from ._common import (
     positive_or_auto,
 )
 from ._config import load_config
-from ._descriptor import descriptor_from
-from ._options import multiway_options, used_config
+from ._descriptor import chosen_descriptor, descriptor_from
+from ._options import reconstruct_options
 from ._paths import scan_paths
-from ._record import run_record
 from ._trust import log
 from .view import add_view
 
@@ -86,7 +85,11 @@ def add_parser(commands) -> None:
     from ..registration.pipeline import GLOBAL_METHODS  # declared in full: this command runs
 
     add_descriptor(p)
-    add_model(p, default="the one-hop object model")
+    add_model(
+        p,
+        default="auto: the scene model, facing the sensors, when at least half "
+        "of the scans read as rooms scanned from their origin; else the one-hop object model",
+    )
     p.add_argument(
         "--global",
         dest="global_method",
@@ -133,7 +136,7 @@ def add_parser(commands) -> None:
         default=-1,
         help="parallel pair registrations (default -1: every core; the poses do not depend on it)",
     )
-    add_viewpoints(p, "scan")
+    add_viewpoints(p, "scan", chosen=True)
     add_seed(p, default=None)
     add_force(p)
     add_view(p)
@@ -172,10 +175,7 @@ def run(args: argparse.Namespace) -> int:
         "viewpoints": args.viewpoints,
         "min_fitness": args.min_fitness,
     }
-    options = multiway_options(config, flags, descriptor)
-    options["sequential"] = args.sequential
-    used = used_config(options, section, {"multiway": {"min_fitness": options["min_fitness"]}})
-    record = run_record("reconstruct", used, descriptor)
+    options, record = reconstruct_options(config, flags, descriptor, section, args.sequential)
     trajectories = _trajectories(args.trajectory or [], args.trajectory_format or [])
     outputs = (args.output, args.poses, args.mesh, args.pose_graph, *trajectories, args.result)
     for out in outputs:
@@ -186,6 +186,12 @@ def run(args: argparse.Namespace) -> int:
     if len(args.scans) < 2:
         raise CommandError(f"reconstruct needs two or more scans, got {len(args.scans)}")
     scans = [read_cloud(p) for p in args.scans]
+    choice = None
+    if descriptor is None:  # the model is chosen from the scans, as register_multiway() does
+        descriptor, flags["viewpoints"], choice = chosen_descriptor(
+            section, options["viewpoints"], scans, args.scans
+        )
+        options, record = reconstruct_options(config, flags, descriptor, section, args.sequential)
     try:
         result = register_multiway(scans, descriptor, n_jobs=args.n_jobs, progress=None, **options)
     except ValueError as exc:  # name the files, not their places in the list
@@ -193,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
             raise
         named = re.sub(r"scan (\d+)", lambda m: args.scans[int(m[1])], str(exc))
         raise CommandError(named) from exc
+    result.model = choice
     merged = result.merge(scans, voxel_size=args.output_voxel_size, colour=args.colour_by_scan)
     check_size(args.output, cloud_bytes(merged), args.force, "downsample with --output-voxel-size")
     # A LAS/LAZ output keeps scan 0's grid (offsets, scales), and,

@@ -25,7 +25,7 @@ from ._common import (
     vector,
 )
 from ._config import load_config
-from ._descriptor import descriptor_from
+from ._descriptor import chosen_descriptor, descriptor_from
 from ._options import registration_options, used_config
 from ._record import run_record
 from ._trust import read_noting_precision, trust_problems, trust_status
@@ -45,7 +45,11 @@ def add_parser(commands) -> None:
     p.add_argument("source", help="the cloud to move (.ply, .las, .e57, .bin, .npy, ...)")
     p.add_argument("target", help="the cloud to move it onto")
     add_descriptor(p)
-    add_model(p, default="the one-hop object model")
+    add_model(
+        p,
+        default="auto: the scene model, facing the sensor, when both clouds read "
+        "as rooms scanned from their origin; else the one-hop object model",
+    )
     p.add_argument(
         "--global",
         dest="global_method",
@@ -75,7 +79,7 @@ def add_parser(commands) -> None:
         "states: 4096 for --model scene; else 2048)",
     )
     p.add_argument("--init", help="text file with a 4x4 start transformation (for ICP alone)")
-    add_viewpoints(p, "cloud (source first)")
+    add_viewpoints(p, "cloud (source first)", chosen=True)
     p.add_argument(
         "--up",
         type=vector,
@@ -128,6 +132,13 @@ def run(args: argparse.Namespace) -> int:
     rounded: list[str] = []
     source = read_noting_precision(args.source, rounded)
     target = read_noting_precision(args.target, rounded)
+    choice = None
+    if descriptor is None:  # the model is chosen from the clouds, as register() does
+        descriptor, flags["viewpoints"], choice = chosen_descriptor(
+            section, options["viewpoints"], [source, target], [args.source, args.target]
+        )
+        options = registration_options(config, flags, descriptor)
+        record = run_record("register", used_config(options, section), descriptor)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RegistrationWarning)  # reported below, once
@@ -140,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
             )
     except ValueError as exc:  # name the files, not just "source" and "target"
         raise CommandError(f"{exc} (source: {args.source}, target: {args.target})") from exc
+    result.model = choice
     summary = result.as_dict()
     problems = trust_problems(result, rounded)
     summary.update(

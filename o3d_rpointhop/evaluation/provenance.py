@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 from .._utils.provenance import json_safe, library_facts
 from ..descriptors import FPFHTransformer, RPointHopTransformer, descriptor_identity
@@ -25,6 +26,7 @@ __all__ = [
     "model_identity",
     "multiway_provenance",
     "read_results",
+    "rooms_provenance",
     "run_provenance",
 ]
 
@@ -152,6 +154,21 @@ def multiway_provenance(methods) -> dict:
         "open3d-recipe": _FEATURES["open3d-fpfh"],
     }
     return descriptor_provenance({name: kinds[name]() for name in methods})
+
+
+def rooms_provenance(methods) -> dict:
+    """The provenance of a rooms benchmark run (``auto``: both shipped models it chooses
+    between; ``fpfh`` and ``open3d-recipe`` as in :func:`multiway_provenance`)."""
+    from ..registration.model_choice import MODELS
+
+    descriptors: dict[str, Any] = {}
+    for name in methods:
+        if name == "auto":
+            for model in MODELS:
+                descriptors[f"auto-{model}"] = RPointHopTransformer.pretrained(model)
+        else:
+            descriptors[name] = _FEATURES["fpfh" if name == "fpfh" else "open3d-fpfh"]()
+    return descriptor_provenance(descriptors)
 
 
 def _methods_of(results: dict) -> set[str]:

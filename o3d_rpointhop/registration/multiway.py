@@ -38,10 +38,12 @@ from .._utils.parallel import parallel_map, worker_copy
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints, renamed_seed
+from ..descriptors._pretrained import PRETRAINED_MODELS
 from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_points
+from .model_choice import resolve_model
 from .pipeline import RegistrationPipeline, build_chain
 from .pose_graph import largest_part, optimise, poses_from_tree, spanning_tree
 from .prepared import PreparedCloud, estimate_normals, prepare_cloud
@@ -265,7 +267,7 @@ def _candidates(
 @validate_params(
     {
         "clouds": [list, tuple],
-        "descriptor": [None, HasMethods(["transform"])],
+        "descriptor": [None, StrOptions({"auto", *PRETRAINED_MODELS}), HasMethods(["transform"])],
         "global_method": [str, HasMethods(["run"])],
         "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
@@ -275,16 +277,16 @@ def _candidates(
         "random_state": [Interval(Integral, 0, None, closed="left")],
         "settings": [None, RegistrationSettings],
         "seed": [None, Interval(Integral, 0, None, closed="left")],
-        "viewpoints": [None, StrOptions({"origin"}), "array-like"],
+        "viewpoints": [None, StrOptions({"origin", "auto"}), "array-like"],
         "sequential": ["boolean"],
     },
     prefer_skip_nested_validation=False,  # the descriptor is the caller's, checked by itself
 )
 def register_multiway(
     clouds: list[Any],
-    descriptor: Any = None,
+    descriptor: Any = "auto",
     *,
-    viewpoints: Any = None,
+    viewpoints: Any = "auto",
     global_method: Any = "auto",
     voxel_size: float | str = "auto",
     n_global_points: int | str = "auto",
@@ -303,17 +305,25 @@ def register_multiway(
     ----------
     clouds : list of array-like (n_k, 3) or Open3D point clouds
         At least two scans; sizes and resolutions may differ.
-    descriptor : transformer, default=None
-        ``None`` is ``register()``'s default (the shipped one-hop object model,
-        ``pretrained("object")``); an ``FPFHTransformer`` works the same way. Each scan is
-        described once. Pairs are screened with the global step the descriptor states
+    descriptor : "auto", {"object", "scene", "modelnet40"}, transformer or None, \
+            default="auto"
+        ``"auto"``: the shipped model chosen from the scans as ``register()`` chooses
+        it (:func:`~o3d_rpointhop.registration.model_choice.choose_model`): the scene
+        model, facing a sensor at each scan's origin, when at least half of the scans
+        read as rooms scanned from their origin, else the one-hop object model;
+        ``result.model`` says which and why. A name: that shipped model; ``None``: the
+        object model (``pretrained("object")``); an ``FPFHTransformer`` or any fitted
+        descriptor works the same way. Each scan is described once. Pairs are screened
+        with the global step the descriptor states
         (``registration_global_method_``: the consensus for the shipped scene model,
         so that ``RPointHopTransformer.pretrained("scene")`` registers scans of rooms
         as ``register()`` does), else RANSAC.
-    viewpoints : None, "origin" or array-like of shape (n_scans, 3), default=None
+    viewpoints : "auto", None, "origin" or array-like of shape (n_scans, 3), \
+            default="auto"
         Where each scan's sensor stood, in the scan's own coordinates; ``"origin"``:
         every scan is in its sensor's frame. Normals and local frames then face the
         sensor (see :func:`~o3d_rpointhop.register`). ``None``: no sensor is known.
+        ``"auto"``: chosen with the model when ``descriptor="auto"``, else None.
     global_method : str or step, default="auto"
         The step that screens each candidate pair: ``"auto"`` (the one the descriptor
         states, as above), a name of :data:`~o3d_rpointhop.registration.GLOBAL_METHODS`
@@ -369,6 +379,7 @@ def register_multiway(
     if len(clouds) < 2:
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
+    descriptor, viewpoints, choice = resolve_model(descriptor, viewpoints, points)
     views = as_viewpoints(viewpoints, len(points))
     n = len(points)
     seed = renamed_seed(random_state, seed, "register_multiway")
@@ -486,6 +497,7 @@ def register_multiway(
         frame=canon[frame],
         parts=[sorted(canon[c] for c in part) for part in every_part],
         part_poses=part_poses,
+        model=None if choice is None else choice.as_dict(),
     )
 
 

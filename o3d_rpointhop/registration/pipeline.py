@@ -22,10 +22,12 @@ from .._utils.params import (
 )
 from .._utils.threads import core_budget
 from .._utils.validation import check_rigid_transformation, renamed_seed
+from ..descriptors._pretrained import PRETRAINED_MODELS
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method
 from .flags import assess, warn_flags
+from .model_choice import resolve_model
 from .result import RegistrationResult
 from .scoring import check_pairs, registration_scorer
 from .settings import RegistrationSettings
@@ -477,15 +479,15 @@ def build_chain(
         "refine": [StrOptions({*REFINE_METHODS, "none"}), RegistrationStep, list, tuple, None],
         "init": ["array-like", None],
         "seed": [None, Interval(Integral, 0, None, closed="left")],
+        "descriptor": [None, StrOptions({"auto", *PRETRAINED_MODELS}), HasMethods(["transform"])],
+        "viewpoints": [None, StrOptions({"origin", "auto"}), "array-like"],
         **{
             name: RegistrationPipeline._parameter_constraints[name]
             for name in (
-                "descriptor",
                 "voxel_size",
                 "n_global_points",
                 "random_state",
                 "settings",
-                "viewpoints",
                 "up",
                 "n_jobs",
             )
@@ -496,7 +498,7 @@ def build_chain(
 def register(
     source: Any,
     target: Any,
-    descriptor: Any = None,
+    descriptor: Any = "auto",
     *,
     global_method: str | RegistrationStep | None = "auto",
     refine: str | RegistrationStep | list | None = "point_to_plane",
@@ -505,7 +507,7 @@ def register(
     init: np.ndarray | None = None,
     random_state: int = 0,
     settings: RegistrationSettings | None = None,
-    viewpoints: Any = None,
+    viewpoints: Any = "auto",
     up: Any = None,
     n_jobs: int | None = None,
     seed: int | None = None,
@@ -516,9 +518,18 @@ def register(
     ----------
     source, target : array-like (n, 3) or Open3D point cloud
         Any size and metric scale; not modified.
-    descriptor : transformer, default=None
-        Fitted ``RPointHopTransformer`` or an ``FPFHTransformer``; ``None`` is the
-        shipped one-hop object model (``pretrained("object")``, 24-D).
+    descriptor : "auto", {"object", "scene", "modelnet40"}, transformer or None, \
+            default="auto"
+        ``"auto"``: the shipped model that serves these clouds, chosen from them
+        (:func:`~o3d_rpointhop.registration.model_choice.choose_model`): the scene model,
+        facing a sensor at each cloud's origin, when both clouds read as rooms scanned
+        from their origin (every point in front of the origin, inside a cone about the
+        mean viewing direction, clear of it, and 1-30 units across, read as metres:
+        3DMatch fragments, depth frames); else the one-hop object model (objects, scans
+        of objects, outdoor LiDAR sweeps). ``result.model`` says which and why. A name:
+        that shipped model (``RPointHopTransformer.pretrained(name)``); a fitted
+        ``RPointHopTransformer``, an ``FPFHTransformer`` or any descriptor; ``None``:
+        the one-hop object model (``pretrained("object")``, 24-D).
     global_method : {"auto", "ransac", "consensus", "fgr", "svd"}, RegistrationStep or \
             None, default="auto"
         ``"ransac"`` is :class:`RANSACGlobal`, ``"consensus"`` the correspondence-graph
@@ -551,12 +562,14 @@ def register(
         The multiples of the resolution every unset distance is derived from (RANSAC's
         inlier distance, ICP's passes, the normals' radius, ...); ``None`` is
         ``RegistrationSettings()``.
-    viewpoints : None, "origin" or (array-like, array-like), default=None
+    viewpoints : "auto", None, "origin" or (array-like, array-like), default="auto"
         Where the sensors stood: ``"origin"`` for scans in their sensor's frame (3DMatch
         fragments, LiDAR sweeps, depth images), or ``(source_sensor, target_sensor)``,
         each in its own cloud's coordinates. Normals and local frames then face the
         sensor, so they repeat between scans (on indoor scans this is worth more than
-        any setting; docs/benchmarks.md). ``None``: no sensor is known.
+        any setting; docs/benchmarks.md). ``None``: no sensor is known. ``"auto"``:
+        chosen with the model when ``descriptor="auto"`` (``"origin"`` with the scene
+        model), else None.
     up : None, array-like of shape (3,) or (array-like, array-like), default=None
         See :class:`RegistrationPipeline`.
     n_jobs : int, default=None
@@ -570,7 +583,8 @@ def register(
     Returns
     -------
     RegistrationResult
-        ``result.transformation`` maps the source into the target frame.
+        ``result.transformation`` maps the source into the target frame;
+        ``result.model`` the automatic choice (None for a given descriptor).
 
     Examples
     --------
@@ -581,6 +595,9 @@ def register(
     >>> bool(abs(result.transformation[0, 3] + 0.1) < 1e-3)
     True
     """
+    descriptor, viewpoints, choice = resolve_model(
+        descriptor, viewpoints, [source, target], ["source", "target"]
+    )
     steps = build_chain(global_method, refine, descriptor)
     pipeline = RegistrationPipeline(
         steps,
@@ -595,4 +612,6 @@ def register(
     )
     # validate_params checked the pipeline's parameters; the steps are checked here.
     # The warnings of a flagged result point at register()'s caller.
-    return pipeline._register(pipeline._check(own=False), source, target, init, stacklevel=5)
+    result = pipeline._register(pipeline._check(own=False), source, target, init, stacklevel=5)
+    result.model = None if choice is None else choice.as_dict()
+    return result

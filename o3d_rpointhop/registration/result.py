@@ -77,6 +77,15 @@ def _matrix(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
     return arr
 
 
+def _model(value: Any) -> dict | None:
+    """A stored model choice: None, or a JSON object."""
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise TypeError(f"model must be a JSON object, got {type(value).__name__}")
+    return dict(value)
+
+
 def _pairs(value: Any) -> np.ndarray:
     return np.asarray(value, dtype=np.int64).reshape(-1, 2)
 
@@ -222,6 +231,9 @@ class RegistrationResult:
         are judged at that wider distance): a symmetric shape, or a featureless plane,
         whose pose the data cannot decide. A :class:`RegistrationWarning` is issued
         with either flag.
+    model : dict or None
+        What ``register(descriptor="auto")`` chose (``ModelChoice.as_dict()``: the
+        shipped model, the viewpoints and why); None for a given descriptor.
     """
 
     transformation: np.ndarray
@@ -235,6 +247,7 @@ class RegistrationResult:
     converged: bool = True
     ambiguous: bool = False
     preparation_seconds: float = 0.0
+    model: dict | None = None
 
     @property
     def margin(self) -> float | None:
@@ -320,6 +333,7 @@ class RegistrationResult:
             "margin": self.margin,
             "seconds": self.seconds,
             "preparation_seconds": self.preparation_seconds,
+            "model": self.model,
             "steps": [s.as_dict() for s in self.steps],
         }
 
@@ -352,6 +366,7 @@ class RegistrationResult:
                 converged=bool(body["converged"]),
                 ambiguous=bool(body["ambiguous"]),
                 preparation_seconds=float(body.get("preparation_seconds", 0.0)),  # older files
+                model=_model(body.get("model")),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
@@ -409,6 +424,9 @@ class MultiwayResult:
         maps scan ``k`` into the frame of part ``p``'s scan given first (None outside
         the part). Each smaller part is reconstructed as the placed one is (optimised,
         refined on the full scans), on its own; ``part_poses[0]`` is ``poses``.
+    model : dict or None
+        The automatic model choice (``ModelChoice.as_dict()``: the model, the
+        viewpoints and why), None for a given descriptor.
     """
 
     poses: list
@@ -421,6 +439,7 @@ class MultiwayResult:
     frame: int = 0
     parts: list = field(default_factory=list)
     part_poses: list = field(default_factory=list)
+    model: dict | None = None
 
     def merge(
         self,
@@ -531,6 +550,7 @@ class MultiwayResult:
             "frame": self.frame,
             "parts": [list(part) for part in self.parts],
             "part_poses": self.part_poses,
+            "model": self.model,
             "pose_graph": {
                 "nodes": [np.asarray(n.pose) for n in graph.nodes],
                 "edges": [
@@ -583,6 +603,7 @@ class MultiwayResult:
                     [None if p is None else _matrix(p, (4, 4), f"{path}") for p in part]
                     for part in body.get("part_poses", [])
                 ],
+                model=_model(body.get("model")),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
@@ -600,4 +621,5 @@ class MultiwayResult:
             "edges": [[names[i], names[j]] for i, j in self.edges],
             "voxel_size": self.voxel_size,
             "seconds": self.seconds,
+            "model": self.model,
         }
