@@ -43,6 +43,7 @@ from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_points
+from .free_space import free_space_violation
 from .model_choice import resolve_model
 from .pipeline import RegistrationPipeline, build_chain
 from .pose_graph import largest_part, optimise, poses_from_tree, spanning_tree
@@ -60,6 +61,9 @@ reg = o3d.pipelines.registration
 #: Smallest ICP fitness (at 1.5 resolutions) for a pair to become an edge; a pair whose
 #: inliers spread like a chance alignment's (``RegistrationResult.converged``) never does.
 MIN_EDGE_FITNESS = 0.3
+#: The largest share of either scan a pair's pose may put in space the other scan's
+#: sensor saw empty, for the pair to become an edge (when the sensors are known).
+MAX_FREE_SPACE_VIOLATION = 0.1
 #: Pairs registered per scan when there are too many scans for all pairs.
 RETRIEVED_NEIGHBOURS = 6
 #: Up to this many scans, every pair is a candidate.
@@ -272,6 +276,7 @@ def _candidates(
         "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "n_global_points": [Interval(Integral, 3, None, closed="left"), StrOptions({"auto"})],
         "min_fitness": [Interval(Real, 0, 1, closed="right")],
+        "max_violation": [Interval(Real, 0, 1, closed="both"), None],
         "n_jobs": [None, Integral],
         "progress": [None, "boolean"],
         "random_state": [Interval(Integral, 0, None, closed="left")],
@@ -291,6 +296,7 @@ def register_multiway(
     voxel_size: float | str = "auto",
     n_global_points: int | str = "auto",
     min_fitness: float = MIN_EDGE_FITNESS,
+    max_violation: float | None = MAX_FREE_SPACE_VIOLATION,
     n_jobs: int | None = None,
     progress: bool | None = None,
     random_state: int = 0,
@@ -341,6 +347,13 @@ def register_multiway(
         A pair becomes an edge when its screening leaves at least this share of the
         source scan (at the common resolution) within the settings' ``edge_distance``
         (1.5 resolutions) of the target.
+    max_violation : float or None, default=MAX_FREE_SPACE_VIOLATION
+        With every scan's sensor position known (``viewpoints``), a fitting pair becomes
+        an edge only when its pose puts at most this share of either scan in front of
+        what the other scan's sensor saw (:mod:`~o3d_rpointhop.registration.free_space`):
+        wrong poses of rooms that fit as well as right ones (floors and walls aligned,
+        repeated furniture) do, right ones barely. ``result.free_space`` holds each
+        fitting pair's share. ``None``: no such check.
     n_jobs : int, default=None
         Cores to use. ``None``: every core, scans and pairs one after another, each on
         the compiled kernels' threads. An int ``k``: ``k`` joblib processes of one
@@ -452,11 +465,17 @@ def register_multiway(
         unit="pair",
     )
     pairs = {pair: (t, f) for pair, (t, f, _) in zip(candidates, results, strict=True)}
-    edges = {
-        pair: result
-        for pair, result in zip(candidates, results, strict=True)
-        if result[1] >= min_fitness
-    }
+    fitting = {p: r for p, r in zip(candidates, results, strict=True) if r[1] >= min_fitness}
+    seen = _free_space(fitting, prepared, views, voxel)
+    limit = 1.0 if max_violation is None else max_violation
+    edges = {p: r for p, r in fitting.items() if seen.get(p, 0.0) <= limit}
+    if len(edges) < len(fitting):
+        log.info(
+            "%d fitting pairs left out: they put over %.2f of a scan in space the other "
+            "sensor saw empty",
+            len(fitting) - len(edges),
+            limit,
+        )
     log.info("%d of %d pairs fit (edge fitness >= %.2f)", len(edges), len(candidates), min_fitness)
     for (i, j), (_, fitness, _) in zip(candidates, results, strict=True):
         log.debug("pair %d-%d: edge fitness %.3f", canon[i], canon[j], fitness)
@@ -498,7 +517,25 @@ def register_multiway(
         parts=[sorted(canon[c] for c in part) for part in every_part],
         part_poses=part_poses,
         model=None if choice is None else choice.as_dict(),
+        free_space={
+            (min(canon[i], canon[j]), max(canon[i], canon[j])): share
+            for (i, j), share in sorted(seen.items())
+        },
     )
+
+
+def _free_space(fitting: dict, prepared: list, views: list, voxel: float) -> dict:
+    """The free-space violation (:func:`~.free_space.free_space_violation`, on the
+    global clouds, one resolution of margin) of every fitting pair's pose; empty unless
+    every scan's sensor position is known."""
+    if any(v is None for v in views):
+        return {}
+    return {
+        (i, j): free_space_violation(
+            prepared[j].points, prepared[i].points, result[0], views[j], views[i], voxel
+        )
+        for (i, j), result in fitting.items()
+    }
 
 
 def _reconstruct_part(root, edges, tree, points, prepared, settings, seed, n_jobs, progress):

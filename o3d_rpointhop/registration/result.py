@@ -427,6 +427,11 @@ class MultiwayResult:
     model : dict or None
         The automatic model choice (``ModelChoice.as_dict()``: the model, the
         viewpoints and why), None for a given descriptor.
+    free_space : dict
+        ``(i, j) -> share`` for every pair that fit (edge fitness at least
+        ``min_fitness``) when the sensors were known: the share of either scan its pose
+        put in space the other's sensor saw empty; pairs above ``max_violation`` were
+        left out of the graph. Empty without sensor positions.
     """
 
     poses: list
@@ -440,6 +445,7 @@ class MultiwayResult:
     parts: list = field(default_factory=list)
     part_poses: list = field(default_factory=list)
     model: dict | None = None
+    free_space: dict = field(default_factory=dict)
 
     def merge(
         self,
@@ -551,6 +557,7 @@ class MultiwayResult:
             "parts": [list(part) for part in self.parts],
             "part_poses": self.part_poses,
             "model": self.model,
+            "free_space": [[i, j, share] for (i, j), share in sorted(self.free_space.items())],
             "pose_graph": {
                 "nodes": [np.asarray(n.pose) for n in graph.nodes],
                 "edges": [
@@ -604,6 +611,9 @@ class MultiwayResult:
                     for part in body.get("part_poses", [])
                 ],
                 model=_model(body.get("model")),
+                free_space={
+                    (int(i), int(j)): float(share) for i, j, share in body.get("free_space", [])
+                },
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None

@@ -1,0 +1,105 @@
+"""Free-space violations: how much of one scan a pose puts where the other scan's
+sensor saw through.
+
+A sensor at a known position sees, along each ray, the first surface and nothing in
+front of it. A right pose of two scans keeps each scan's points on or behind the surfaces
+the other sensor saw; a wrong pose that still fits (a floor and a wall aligned with
+another floor and wall, a repeated piece of furniture) puts many of them in front, in
+space that sensor saw empty. The share of such points tells wrong edges of a room's pose
+graph from right ones that fit no better (docs/multiway.md, "Scans of rooms").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["ANGULAR_RESOLUTION", "RANGE_MARGIN", "free_space_violation", "violation_share"]
+
+#: Width of a ray bin of the depth images, in radians (1 degree).
+ANGULAR_RESOLUTION = np.radians(1.0)
+#: A point violates free space when it lies nearer to the sensor than the seen surface
+#: by more than this share of that surface's range (plus the absolute margin given).
+RANGE_MARGIN = 0.05
+
+
+def _rays(points: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's range from the origin and the key of its ray bin (azimuth,
+    elevation)."""
+    ranges = np.linalg.norm(points, axis=1)
+    safe = np.where(ranges > 0, ranges, 1.0)
+    azimuth = np.floor(np.arctan2(points[:, 1], points[:, 0]) / resolution).astype(np.int64)
+    elevation = np.arcsin(np.clip(points[:, 2] / safe, -1.0, 1.0))
+    keys = azimuth * (1 << 20) + np.floor(elevation / resolution).astype(np.int64)
+    return ranges, keys
+
+
+def violation_share(
+    points: np.ndarray,
+    seen: np.ndarray,
+    margin: float,
+    resolution: float = ANGULAR_RESOLUTION,
+) -> float:
+    """The share of ``points`` nearer to the origin than what ``seen`` shows along
+    their rays, of those whose rays ``seen`` covers (0 when none do).
+
+    Parameters
+    ----------
+    points, seen : ndarray of shape (n, 3), (m, 3)
+        In the frame of the sensor that saw ``seen``, which stands at the origin.
+    margin : float
+        Absolute margin (the clouds' units): a point counts when it is nearer than the
+        seen surface's range times ``1 - RANGE_MARGIN``, minus ``margin``.
+    resolution : float, default=ANGULAR_RESOLUTION
+        Width of a ray bin, in radians.
+
+    Returns
+    -------
+    float
+    """
+    seen_range, seen_key = _rays(seen, resolution)
+    order = np.lexsort((seen_range, seen_key))
+    keys, first = np.unique(seen_key[order], return_index=True)
+    nearest = seen_range[order][first]
+    ranges, point_keys = _rays(points, resolution)
+    at = np.minimum(np.searchsorted(keys, point_keys), len(keys) - 1)
+    covered = keys[at] == point_keys
+    if not covered.any():
+        return 0.0
+    limit = nearest[at[covered]] * (1.0 - RANGE_MARGIN) - margin
+    return float(np.mean(ranges[covered] < limit))
+
+
+def free_space_violation(
+    source: np.ndarray,
+    target: np.ndarray,
+    transformation: np.ndarray,
+    source_view: np.ndarray,
+    target_view: np.ndarray,
+    margin: float,
+) -> float:
+    """The larger share of either scan that ``transformation`` puts in the other
+    sensor's seen free space (:func:`violation_share`, both ways): the same whichever
+    scan is the source.
+
+    Parameters
+    ----------
+    source, target : ndarray of shape (n, 3), (m, 3)
+        Each in its own coordinates.
+    transformation : ndarray of shape (4, 4)
+        Maps ``source`` into ``target``'s coordinates.
+    source_view, target_view : ndarray of shape (3,)
+        Where each scan's sensor stood, in that scan's coordinates.
+    margin : float
+        Absolute range margin (see :func:`violation_share`).
+
+    Returns
+    -------
+    float
+        From 0 (nothing in front of what either sensor saw) to 1.
+    """
+    rotation, shift = transformation[:3, :3], transformation[:3, 3]
+    moved = source @ rotation.T + shift - target_view
+    into_target = violation_share(moved, target - target_view, margin)
+    back = (target - shift) @ rotation - source_view  # target into source's coordinates
+    into_source = violation_share(back, source - source_view, margin)
+    return max(into_target, into_source)
