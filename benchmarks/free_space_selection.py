@@ -25,7 +25,7 @@ from o3d_rpointhop.evaluation.rooms import pairs_registered, scene_data
 from o3d_rpointhop.evaluation.scene_models import TRAINING_SCENES
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
-CANDIDATES = ("none", "0.08", "0.1", "0.12", "0.15")
+CANDIDATES = ("none", "0.05", "0.08", "0.1", "0.12", "0.15")
 
 
 def main(argv=None) -> int:

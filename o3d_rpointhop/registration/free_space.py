@@ -22,6 +22,19 @@ ANGULAR_RESOLUTION = np.radians(1.0)
 RANGE_MARGIN = 0.05
 
 
+def _equator(seen: np.ndarray) -> np.ndarray:
+    """A rotation taking the mean viewing direction of ``seen`` to the x axis: the rays
+    then lie about the equator of the azimuth / elevation grid, where its bins are all
+    about as wide, and not about a pole, where they narrow to nothing."""
+    mean = seen.mean(axis=0)
+    norm = np.linalg.norm(mean)
+    x = mean / norm if norm > 0 else np.array([1.0, 0.0, 0.0])
+    helper = np.eye(3)[int(np.argmin(np.abs(x)))]
+    z = np.cross(x, helper)
+    z /= np.linalg.norm(z)
+    return np.stack([x, np.cross(z, x), z])  # rows: the new axes
+
+
 def _rays(points: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
     """Each point's range from the origin and the key of its ray bin (azimuth,
     elevation)."""
@@ -56,6 +69,8 @@ def violation_share(
     -------
     float
     """
+    turn = _equator(seen)
+    points, seen = points @ turn.T, seen @ turn.T
     seen_range, seen_key = _rays(seen, resolution)
     order = np.lexsort((seen_range, seen_key))
     keys, first = np.unique(seen_key[order], return_index=True)
