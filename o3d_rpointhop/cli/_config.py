@@ -81,7 +81,7 @@ def default_config() -> dict[str, dict[str, Any]]:
     """Every section with its defaults (``None``: derived from the settings, or the
     command's own default)."""
     from ..descriptors import FPFHTransformer, RPointHopTransformer
-    from ..registration.multiway import MIN_EDGE_FITNESS
+    from ..registration.multiway import MAX_FREE_SPACE_VIOLATION, MIN_EDGE_FITNESS
 
     config: dict[str, dict[str, Any]] = {"register": dict(REGISTER_KEYS)}
     for name, cls in step_classes().items():
@@ -90,7 +90,10 @@ def default_config() -> dict[str, dict[str, Any]]:
         if "matcher" in params:  # [<step>.matcher]: the step's default matcher
             config[f"{name}.matcher"] = cls.default_matcher().get_params()
     config["settings"] = settings_section()
-    config["multiway"] = {"min_fitness": MIN_EDGE_FITNESS}
+    config["multiway"] = {
+        "min_fitness": MIN_EDGE_FITNESS,
+        "max_violation": MAX_FREE_SPACE_VIOLATION,
+    }
     config["descriptor"] = dict(DESCRIPTOR_KEYS)
     config["fpfh"] = estimator_section(FPFHTransformer())
     config["fit"] = estimator_section(RPointHopTransformer())

@@ -4,12 +4,19 @@ arguments are (:func:`used_config`)."""
 
 from __future__ import annotations
 
+import argparse
 from typing import Any
 
 from ._common import UsageError
 from ._config import OBJECT_PARAMETERS, REGISTER_KEYS, settings_section, step_classes
 
-__all__ = ["multiway_options", "reconstruct_options", "registration_options", "used_config"]
+__all__ = [
+    "add_edge_limits",
+    "multiway_options",
+    "reconstruct_options",
+    "registration_options",
+    "used_config",
+]
 
 
 def registration_options(
@@ -117,14 +124,21 @@ def multiway_options(
         raise UsageError("reconstruct refines with point_to_plane ICP only ([register] refine)")
     if options["global_method"] is None:
         raise UsageError("reconstruct needs a global step ([register] global_method)")
-    from ..registration.multiway import MIN_EDGE_FITNESS
+    from ..registration.multiway import MAX_FREE_SPACE_VIOLATION, MIN_EDGE_FITNESS
 
+    section = config.get("multiway", {})
     min_fitness = flags.get("min_fitness")
     if min_fitness is None:
-        min_fitness = config.get("multiway", {}).get("min_fitness", MIN_EDGE_FITNESS)
+        min_fitness = section.get("min_fitness", MIN_EDGE_FITNESS)
     options["min_fitness"] = min_fitness
     if not (isinstance(min_fitness, (int, float)) and 0 < min_fitness <= 1):
         raise UsageError(f"min_fitness must be in (0, 1], got {options['min_fitness']!r}")
+    limit = flags.get("max_violation")
+    if limit is None:
+        limit = section.get("max_violation", MAX_FREE_SPACE_VIOLATION)
+    if limit != "none" and not (isinstance(limit, (int, float)) and 0 <= limit <= 1):
+        raise UsageError(f"max_violation must be in [0, 1] or 'none', got {limit!r}")
+    options["max_violation"] = None if limit == "none" else limit
     return options
 
 
@@ -196,5 +210,38 @@ def reconstruct_options(
     from ._record import run_record
 
     options = {**multiway_options(config, flags, descriptor), "sequential": sequential}
-    used = used_config(options, section, {"multiway": {"min_fitness": options["min_fitness"]}})
+    limit = "none" if options["max_violation"] is None else options["max_violation"]
+    edges = {"min_fitness": options["min_fitness"], "max_violation": limit}
+    used = used_config(options, section, {"multiway": edges})
     return options, run_record("reconstruct", used, descriptor)
+
+
+def _share_or_none(text: str) -> float | str:
+    """``--max-violation``: a share in [0, 1], or ``none``."""
+    if text == "none":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a share in [0, 1] or 'none', got {text!r}")
+    return value
+
+
+def add_edge_limits(parser: argparse.ArgumentParser) -> None:
+    """``--min-fitness`` and ``--max-violation``: what a screened pair needs to become
+    an edge of the pose graph."""
+    parser.add_argument(
+        "--min-fitness",
+        type=float,
+        help="share of a scan within 1.5 resolutions of the other for a pair to become an "
+        "edge (default 0.3; [multiway] min_fitness)",
+    )
+    parser.add_argument(
+        "--max-violation",
+        type=_share_or_none,
+        help="with the sensors known, the largest share of either scan a pair's pose may put "
+        "in space the other sensor saw empty, for the pair to become an edge, or 'none' "
+        "(default 0.1; [multiway] max_violation)",
+    )

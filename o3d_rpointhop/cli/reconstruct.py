@@ -26,7 +26,7 @@ from ._common import (
 )
 from ._config import load_config
 from ._descriptor import chosen_descriptor, descriptor_from
-from ._options import reconstruct_options
+from ._options import add_edge_limits, reconstruct_options
 from ._paths import scan_paths
 from ._trust import log
 from .view import add_view
@@ -109,12 +109,7 @@ def add_parser(commands) -> None:
         help="points the largest scan keeps at the common resolution (default: auto, what "
         "the model states: 4096 for --model scene; else 2048)",
     )
-    p.add_argument(
-        "--min-fitness",
-        type=float,
-        help="share of a scan within 1.5 resolutions of the other for a pair to become an "
-        "edge (default 0.3; [multiway] min_fitness)",
-    )
+    add_edge_limits(p)
     p.add_argument(
         "--sequential",
         action="store_true",
@@ -174,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
         "random_state": args.seed,
         "viewpoints": args.viewpoints,
         "min_fitness": args.min_fitness,
+        "max_violation": args.max_violation,
     }
     options, record = reconstruct_options(config, flags, descriptor, section, args.sequential)
     trajectories = _trajectories(args.trajectory or [], args.trajectory_format or [])

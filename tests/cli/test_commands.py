@@ -97,7 +97,8 @@ def test_reconstruct_reads_folders_and_patterns_and_keeps_line_k_for_scan_k(tmp_
 
 
 def test_reconstruct_reaches_every_setting_and_records_its_run(tmp_path, capsys):
-    """--global, --voxel-size (the resolution, as register's), --min-fitness and a
+    """--global, --voxel-size (the resolution, as register's), --min-fitness,
+    --max-violation and a
     config's sections reach register_multiway: the poses equal the library's called
     with the same options; the poses file records the run, and ``config --from`` on it
     repeats the run to the bit. A refinement multiway cannot use is refused before any
@@ -115,7 +116,8 @@ def test_reconstruct_reaches_every_setting_and_records_its_run(tmp_path, capsys)
     poses = tmp_path / "p.json"
     args = [
         *names, "-o", str(tmp_path / "m.ply"), "--poses", str(poses), "--global", "ransac",
-        "--voxel-size", "0.04", "--min-fitness", "0.4", "--set", "ransac.max_iteration=50000",
+        "--voxel-size", "0.04", "--min-fitness", "0.4", "--max-violation", "0.2",
+        "--set", "ransac.max_iteration=50000",
         "--set", "settings.edge_factor=2.0", "--n-jobs", "1",
     ]  # fmt: skip
     assert main(["reconstruct", *args]) == EXIT_OK
@@ -125,6 +127,7 @@ def test_reconstruct_reaches_every_setting_and_records_its_run(tmp_path, capsys)
         global_method=RANSACGlobal(max_iteration=50000),
         voxel_size=0.04,
         min_fitness=0.4,
+        max_violation=0.2,
         settings=RegistrationSettings(edge_factor=2.0),
     )
     assert summary["voxel_size"] == 0.04
@@ -132,6 +135,7 @@ def test_reconstruct_reaches_every_setting_and_records_its_run(tmp_path, capsys)
         np.testing.assert_array_equal(np.array(got), want)
     config = summary["provenance"]["config"]
     assert config["multiway"]["min_fitness"] == 0.4
+    assert config["multiway"]["max_violation"] == 0.2
     assert config["ransac"]["max_iteration"] == 50000 and config["register"]["voxel_size"] == 0.04
     toml = tmp_path / "c.toml"
     assert main(["config", "--from", str(poses), "-o", str(toml)]) == 0
