@@ -320,6 +320,20 @@ METHODS = _methods(
         datasets=_SCENES,
         model="scene",
     ),
+    *(
+        Method(
+            f"rpointhop-scene-verified-{k}-free-{limit}",
+            f"R-PointHop, shipped scene model, consensus with {k} hypotheses verified by "
+            f"overlap, those putting over {limit} of a cloud in the other sensor's seen free "
+            "space rejected, + point-to-plane ICP",
+            _register_with(
+                global_method=global_step("consensus", k, step={"max_violation": limit})
+            ),
+            datasets=_SCENES,
+            model="scene",
+        )
+        for k, limit in ((3, 0.1), (8, 0.1))
+    ),
     Method(
         "rpointhop-scene-salient",
         "R-PointHop, shipped scene model, consensus on matches between salient points "

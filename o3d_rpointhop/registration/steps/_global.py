@@ -78,6 +78,9 @@ class GlobalStep(RegistrationStep):
     """
 
     kind = "global"
+    #: Free-space limit of the hypotheses' verification (a step that has the parameter
+    #: sets it; :func:`~._verification.verify`).
+    max_violation: float | None = None
 
     @classmethod
     def default_matcher(cls) -> Matcher:
@@ -132,7 +135,8 @@ class GlobalStep(RegistrationStep):
         gives); else ``estimate``."""
         if len(hypotheses) < 2:
             return estimate, {}
-        check = verify(context, hypotheses, distance, GlobalStep._matched(context, corr))
+        matched = GlobalStep._matched(context, corr)
+        check = verify(context, hypotheses, distance, matched, self.max_violation)
         info = {
             "hypothesis_scores": [round(float(s), 6) for s in check.scores],
             "chosen_hypothesis": check.best,

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._utils.cells import CellGrid
+from ..free_space import free_space_violation
 from ._hypotheses import DISTINCT_SHIFT, apart_from, match_support, overlap_score
 from ._trial_icp import refine_point_to_plane
 from .icp import PointToPlaneICP
@@ -49,7 +50,11 @@ class Verification:
 
 
 def verify(
-    context, hypotheses: np.ndarray, distance: float, matched: tuple[np.ndarray, np.ndarray]
+    context,
+    hypotheses: np.ndarray,
+    distance: float,
+    matched: tuple[np.ndarray, np.ndarray],
+    max_violation: float | None = None,
 ) -> Verification:
     """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
     global clouds within ``distance`` and score it by its :func:`overlap_score` (with
@@ -67,6 +72,10 @@ def verify(
         The step's inlier distance: the ICP's correspondence distance and the score's.
     matched : (ndarray, ndarray)
         The step's matched source and target points (centred frame), row by row.
+    max_violation : float, default=None
+        With the sensors known (the context's viewpoints), a hypothesis that puts more
+        than this share of either cloud where the other's sensor saw empty space
+        (:func:`~o3d_rpointhop.registration.free_space.free_space_violation`) scores 0.
 
     Returns
     -------
@@ -90,6 +99,19 @@ def verify(
             for t in refined
         ]
     )
+    views, limit = context.viewpoints, max_violation
+    if views is not None and limit is not None:
+        # A pose that puts more than ``limit`` of a cloud where the other sensor saw
+        # empty space is wrong however well it fits (free_space.py).
+        seen = np.array(
+            [
+                free_space_violation(
+                    source, target, t, views["source"], views["target"], context.voxel_size
+                )
+                for t in refined
+            ]
+        )
+        scores = np.where(seen <= limit, scores, 0.0)
     best = int(np.argmax(scores))
     if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
         best = 0

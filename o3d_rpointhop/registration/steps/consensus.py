@@ -72,6 +72,10 @@ class ConsensusGlobal(GlobalStep):
         and, inside a joblib worker, one; ``-1``: all cores); the result does not
         depend on it.
     {n_hypotheses}
+    max_violation : float, default=None
+        With several hypotheses and the sensors known (``viewpoints``), a hypothesis
+        that puts more than this share of either cloud where the other sensor saw empty
+        space loses its verification (:mod:`~o3d_rpointhop.registration.free_space`).
     """
 
     name = "consensus"
@@ -87,6 +91,7 @@ class ConsensusGlobal(GlobalStep):
         "weighted_refit": ["boolean"],
         "n_jobs": [None, Integral],
         "n_hypotheses": HYPOTHESES,
+        "max_violation": [Interval(Real, 0, 1, closed="both"), None],
     }
 
     def __init__(
@@ -102,6 +107,7 @@ class ConsensusGlobal(GlobalStep):
         weighted_refit: bool = False,
         n_jobs: int | None = None,
         n_hypotheses: int = 1,
+        max_violation: float | None = None,
     ) -> None:
         self.descriptor = descriptor
         self.matcher = matcher
@@ -113,6 +119,7 @@ class ConsensusGlobal(GlobalStep):
         self.weighted_refit = weighted_refit
         self.n_jobs = n_jobs
         self.n_hypotheses = n_hypotheses
+        self.max_violation = max_violation
 
     @classmethod
     def default_matcher(cls) -> Matcher:
