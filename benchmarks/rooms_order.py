@@ -7,8 +7,9 @@ shuffles. Each reconstruction is scored on the scene's ground-truth pairs (``gt.
 its two fragments passes the official test (``gt.info`` RMSE below 0.2 m). Reported per
 scene: the pairs counted and the fragments placed in each order, their spread, and the
 largest difference between two orders in the relative pose of one pair of placed
-fragments (which is zero when the order does not matter). One method per run, the scene
-model facing the sensors unless ``--model`` says otherwise.
+fragments (which is zero when the order does not matter). One method per run, the
+defaults (the model chosen from the scans, with the viewpoints) unless ``--model`` and
+``--viewpoints`` say otherwise.
 
 Writes ``rooms_order.json`` (and ``rooms_order_timings.json``, the times apart) to
 ``--output``::
@@ -27,18 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from o3d_rpointhop import RPointHopTransformer, register_multiway
-from o3d_rpointhop.datasets import read_gt_info, read_gt_log
 from o3d_rpointhop.datasets.threedmatch import threedmatch_root
 from o3d_rpointhop.evaluation._common import machine_facts
-from o3d_rpointhop.evaluation.metrics import rmse_3dmatch
 from o3d_rpointhop.evaluation.provenance import descriptor_provenance
 from o3d_rpointhop.evaluation.report import split_timings
-from o3d_rpointhop.io import read_cloud
+from o3d_rpointhop.evaluation.rooms import RECALL_RMSE, pairs_registered, scene_data
 from o3d_rpointhop.transforms import rotation_error_deg
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
-#: The official registration test: gt.info RMSE below this, in metres.
-RECALL_RMSE = 0.2
 #: Seeds of the three shuffled orders.
 SHUFFLES = (0, 1, 2)
 
@@ -49,24 +46,6 @@ def orders(n: int) -> dict[str, list[int]]:
     for seed in SHUFFLES:
         found[f"shuffle {seed}"] = [int(k) for k in np.random.default_rng(seed).permutation(n)]
     return found
-
-
-def scene_data(root: Path, scene: str):
-    """The scene's fragment ids (by number), their points, and its ground-truth pairs
-    ``(i, j) -> (truth, information)`` whose two fragments are present."""
-    folder = root / "fragments" / scene
-    ids = sorted(int(p.stem.split("_")[-1]) for p in folder.glob("cloud_bin_*.ply"))
-    points = [np.asarray(read_cloud(folder / f"cloud_bin_{k}.ply").points) for k in ids]
-    truth = {}
-    for bench in ("3DMatch", "3DLoMatch"):
-        gt = root / "benchmarks" / bench / scene
-        if not (gt / "gt.log").is_file():
-            continue
-        info = read_gt_info(gt / "gt.info")
-        for pair, matrix in read_gt_log(gt / "gt.log").items():
-            if pair[0] in ids and pair[1] in ids and pair in info:
-                truth[pair] = (matrix, info[pair])
-    return ids, points, truth
 
 
 def relative(poses: dict[int, np.ndarray], i: int, j: int) -> np.ndarray | None:
@@ -92,14 +71,8 @@ def run_scene(root, scene, descriptor, viewpoints, n_jobs, seed, sequential=Fals
         )
         seconds = time.perf_counter() - start
         poses = {ids[k]: result.poses[place] for place, k in enumerate(order)}
-        counted = 0
-        for (i, j), (matrix, information) in truth.items():
-            estimate = relative(poses, i, j)
-            counted += (
-                estimate is not None and rmse_3dmatch(estimate, matrix, information) < RECALL_RMSE
-            )
         runs[name] = {
-            "gt_pairs_registered": int(counted),
+            "gt_pairs_registered": pairs_registered(poses, truth),
             "placed": sum(p is not None for p in poses.values()),
             "seconds": round(seconds, 1),
         }
@@ -131,8 +104,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=None, help="data folder (default: data_home())")
     parser.add_argument("--scenes", required=True, help="comma-separated scene names or parts")
-    parser.add_argument("--model", default="scene", help="a shipped model name")
-    parser.add_argument("--viewpoints", choices=("origin", "none"), default="origin")
+    parser.add_argument(
+        "--model",
+        default="auto",
+        help="a shipped model name, or auto (register_multiway's default: chosen from the "
+        "scans, with the viewpoints)",
+    )
+    parser.add_argument("--viewpoints", choices=("auto", "origin", "none"), default="auto")
     parser.add_argument("--n-jobs", type=int, default=-1)
     parser.add_argument(
         "--sequential",
@@ -150,8 +128,9 @@ def main(argv=None) -> int:
     ]
     if not scenes:
         parser.error(f"no scene matches {wanted}")
-    descriptor = RPointHopTransformer.pretrained(args.model)
-    viewpoints = None if args.viewpoints == "none" else "origin"
+    auto = args.model == "auto"
+    descriptor = "auto" if auto else RPointHopTransformer.pretrained(args.model)
+    viewpoints = None if args.viewpoints == "none" else args.viewpoints
     out = {
         "settings": {
             "model": args.model,
@@ -169,7 +148,10 @@ def main(argv=None) -> int:
         out["scenes"][scene] = run_scene(
             root, scene, descriptor, viewpoints, args.n_jobs, args.seed, sequential
         )
-    out["provenance"] = descriptor_provenance({f"rpointhop-{args.model}": descriptor})
+    models = ("object", "scene") if auto else (args.model,)
+    out["provenance"] = descriptor_provenance(
+        {f"rpointhop-{m}": RPointHopTransformer.pretrained(m) for m in models}
+    )
     kept, timed = split_timings(out)
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / "rooms_order.json").write_text(json.dumps(kept, indent=1) + "\n")
