@@ -332,7 +332,7 @@ METHODS = _methods(
             datasets=_SCENES,
             model="scene",
         )
-        for k, limit in ((3, 0.1), (8, 0.1))
+        for k, limit in ((3, 0.1), (8, 0.05), (8, 0.1), (8, 0.15), (16, 0.1))
     ),
     Method(
         "rpointhop-scene-salient",
