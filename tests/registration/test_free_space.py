@@ -74,3 +74,15 @@ def test_multiway_keeps_only_edges_within_the_limit():
     assert all(strict.free_space[edge] <= limit for edge in strict.edges)
     with pytest.raises(ValueError, match="max_violation"):
         register_multiway(scans, "scene", viewpoints="origin", max_violation=1.5)
+
+
+def test_the_consensus_verifies_more_hypotheses_when_the_sensors_are_known():
+    from o3d_rpointhop import register
+    from o3d_rpointhop.registration.steps.consensus import SENSOR_HYPOTHESES
+
+    source, target = _room_scans()[:2]
+    seen = register(source, target, "scene", viewpoints="origin")
+    scores = seen.steps[0].info["hypothesis_scores"]
+    assert 1 < len(scores) <= SENSOR_HYPOTHESES
+    blind = register(source, target, "scene", viewpoints=None)
+    assert "hypothesis_scores" not in blind.steps[0].info  # one hypothesis, not verified

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._utils.params import Interval
+from ..._utils.params import Interval, StrOptions
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..matching import Matcher
@@ -17,7 +17,13 @@ from ._base import OPTIONAL_DISTANCE
 from ._consensus import consensus
 from ._global import DESCRIPTOR, HYPOTHESES, MATCHER, GlobalStep, with_shared_docs
 
-__all__ = ["ConsensusGlobal"]
+__all__ = ["SENSOR_HYPOTHESES", "SENSOR_MAX_VIOLATION", "ConsensusGlobal"]
+
+#: Hypotheses ``n_hypotheses="auto"`` verifies when the sensors are known, and the
+#: free-space limit they are verified with: chosen on every official pair of the scene
+#: model's four training scenes (docs/benchmarks_3dmatch.md, "Free space").
+SENSOR_HYPOTHESES = 16
+SENSOR_MAX_VIOLATION = 0.1
 
 #: A distance that may also be 0 (off), or ``None`` (from the settings).
 _OPTIONAL_LENGTH = [None, Interval(Real, 0, None, closed="left")]
@@ -71,11 +77,14 @@ class ConsensusGlobal(GlobalStep):
         within ``OMP_NUM_THREADS``, ``threadpoolctl``'s limits, ``joblib.parallel_config``
         and, inside a joblib worker, one; ``-1``: all cores); the result does not
         depend on it.
-    {n_hypotheses}
-    max_violation : float, default=None
-        With several hypotheses and the sensors known (``viewpoints``), a hypothesis
-        that puts more than this share of either cloud where the other sensor saw empty
-        space loses its verification (:mod:`~o3d_rpointhop.registration.free_space`).
+    {n_hypotheses} ``"auto"`` (the default): :data:`SENSOR_HYPOTHESES` when the
+        sensors are known (``viewpoints``), where the free-space check below can tell
+        the right hypothesis from wrong ones that fit as well, else 1.
+    max_violation : float or None, default=0.1
+        With several hypotheses and the sensors known, a hypothesis that puts more than
+        this share of either cloud where the other sensor saw empty space scores 0 in
+        the verification (:mod:`~o3d_rpointhop.registration.free_space`); ``None``: no
+        such check.
     """
 
     name = "consensus"
@@ -90,7 +99,7 @@ class ConsensusGlobal(GlobalStep):
         "set_size": [Interval(Integral, 2, None, closed="left")],
         "weighted_refit": ["boolean"],
         "n_jobs": [None, Integral],
-        "n_hypotheses": HYPOTHESES,
+        "n_hypotheses": [*HYPOTHESES, StrOptions({"auto"})],
         "max_violation": [Interval(Real, 0, 1, closed="both"), None],
     }
 
@@ -106,8 +115,8 @@ class ConsensusGlobal(GlobalStep):
         set_size: int = 30,
         weighted_refit: bool = False,
         n_jobs: int | None = None,
-        n_hypotheses: int = 1,
-        max_violation: float | None = None,
+        n_hypotheses: int | str = "auto",
+        max_violation: float | None = SENSOR_MAX_VIOLATION,
     ) -> None:
         self.descriptor = descriptor
         self.matcher = matcher
@@ -129,6 +138,13 @@ class ConsensusGlobal(GlobalStep):
         third more time (docs/benchmarks_3dmatch.md)."""
         return Matcher(both_directions=True, max_matches=4000)
 
+    def _n_hypotheses(self, context: RegistrationContext) -> int:
+        """How many hypotheses are verified: ``"auto"`` is :data:`SENSOR_HYPOTHESES`
+        with the sensors known, else 1."""
+        if self.n_hypotheses != "auto":
+            return int(self.n_hypotheses)
+        return SENSOR_HYPOTHESES if context.viewpoints is not None else 1
+
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         settings = context.settings
         distance = self.max_correspondence_distance or settings.ransac_distance
@@ -146,7 +162,7 @@ class ConsensusGlobal(GlobalStep):
             set_size=int(self.set_size),
             weighted_refit=self.weighted_refit,
             upright=None if context.up is None else context.upright,
-            n_hypotheses=int(self.n_hypotheses),
+            n_hypotheses=self._n_hypotheses(context),
             n_threads=kernel_threads(self.n_jobs),
         )
         return self._result_of(context, found, distance, corr, hypotheses=found.n_hypotheses)
