@@ -313,6 +313,14 @@ METHODS = _methods(
         for cap, seeds in ((8000, 5000), (4000, 1000))
     ),
     Method(
+        "rpointhop-scene-one-hypothesis",
+        "R-PointHop, shipped scene model, consensus with its own choice, nothing verified "
+        "(the default before free-space verification) + point-to-plane ICP",
+        _register_with(global_method=global_step("consensus", 1)),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    Method(
         "rpointhop-scene-verified",
         "R-PointHop, shipped scene model, consensus with three hypotheses verified by "
         "overlap + point-to-plane ICP",
