@@ -3,6 +3,7 @@ their parameters."""
 
 from __future__ import annotations
 
+import inspect
 from numbers import Integral, Real
 
 import numpy as np
@@ -44,7 +45,7 @@ MATCHER_DOC = """matcher : Matcher, default=None
         ``None``: the step's :meth:`default_matcher`, {default}."""
 
 #: The docstring of ``n_hypotheses``, shared by the steps that have it.
-N_HYPOTHESES_DOC = """n_hypotheses : int, default={default}
+N_HYPOTHESES_DOC = """n_hypotheses : {kind}, default={default}
         How many of the step's best distinct hypotheses are verified by overlap: each
         is refined by a short point-to-plane ICP on the global clouds and scored by
         how much of both clouds it brings together (inliers both ways where the
@@ -62,8 +63,14 @@ def with_shared_docs(cls: type) -> type:
     step's docstring (absent under ``python -OO``)."""
     if cls.__doc__:
         default = repr(cls.default_matcher()).replace("\n", "").replace("  ", "")
+        own = inspect.signature(cls.__init__).parameters.get("n_hypotheses")
+        hypotheses = 1 if own is None else own.default
         cls.__doc__ = cls.__doc__.replace(
-            "{n_hypotheses}", N_HYPOTHESES_DOC.format(default=1)
+            "{n_hypotheses}",
+            N_HYPOTHESES_DOC.format(
+                kind='int or "auto"' if isinstance(hypotheses, str) else "int",
+                default=f'"{hypotheses}"' if isinstance(hypotheses, str) else hypotheses,
+            ),
         ).replace("{matcher}", MATCHER_DOC.format(default=f"``{default}``"))
     return cls
 
