@@ -84,9 +84,12 @@ def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any
     return build_chain(None, [PointToPlaneICP()])
 
 
-def _pair_context(source, target, prepared_source, prepared_target, settings, seed):
+def _pair_context(source, target, prepared_source, prepared_target, settings, seed, views=None):
     """A context for scan ``source`` onto scan ``target`` at the common resolution, with
-    the scans' prepared global clouds (and descriptors, when they carry them)."""
+    the scans' prepared global clouds (and descriptors, when they carry them) and, when
+    both are known, their sensor positions ``views`` (source's, target's; the global
+    step checks its hypotheses against what the sensors saw)."""
+    known = views is not None and all(v is not None for v in views)
     return RegistrationContext(
         source,
         target,
@@ -95,6 +98,7 @@ def _pair_context(source, target, prepared_source, prepared_target, settings, se
         check=False,
         settings=settings,
         prepared=(prepared_source, prepared_target),
+        viewpoints=tuple(views) if known else None,
     )
 
 
@@ -109,6 +113,7 @@ def _register_pair(
     normals=None,
     global_method="ransac",
     min_fitness=None,
+    views=None,
 ):
     """Scan ``source`` onto scan ``target``: screened from scratch (``init=None``) or
     refined from ``init``.
@@ -127,18 +132,24 @@ def _register_pair(
     step, copied). With ``min_fitness``, a screened pair whose edge fitness falls below
     it is screened the other way too (target onto source), and that pose, inverted, is
     kept when it brings more of the source within the edge distance: a pair is not
-    lost to the direction its canonical order gave it."""
+    lost to the direction its canonical order gave it. ``views``: the two scans' sensor
+    positions (source's, target's), given to the screening's context."""
     edge = settings.edge_distance
     if init is None:
         source, target = prepared_source.points, prepared_target.points
     elif normals is not None:
         target = o3d.geometry.PointCloud(vectors(target))
         target.normals = vectors(normals)
-    context = _pair_context(source, target, prepared_source, prepared_target, settings, seed)
+    screening = views if init is None else None
+    pair = (prepared_source, prepared_target, settings, seed)
+    context = _pair_context(source, target, *pair, screening)
     if init is None:
         transformation, fitness = _screened(context, settings, global_method)
         if min_fitness is not None and fitness < min_fitness:
-            back = _pair_context(target, source, prepared_target, prepared_source, settings, seed)
+            turned_views = None if views is None else views[::-1]
+            back = _pair_context(
+                target, source, prepared_target, prepared_source, settings, seed, turned_views
+            )
             turned, back_fitness = _screened(back, settings, global_method)
             if back_fitness > 0.0:
                 candidate = np.linalg.inv(turned)
@@ -456,7 +467,7 @@ def register_multiway(
         _register_pair,
         [
             (None, None, prepared[j], prepared[i], settings, seed, None, None, global_method)
-            + (min_fitness,)
+            + (min_fitness, (views[j], views[i]))
             for i, j in candidates
         ],
         n_jobs=n_jobs,
