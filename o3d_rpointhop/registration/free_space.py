@@ -13,7 +13,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ANGULAR_RESOLUTION", "RANGE_MARGIN", "free_space_violation", "violation_share"]
+__all__ = [
+    "ANGULAR_RESOLUTION",
+    "RANGE_MARGIN",
+    "SeenSpace",
+    "free_space_violation",
+    "free_space_violations",
+    "violation_share",
+]
 
 #: Width of a ray bin of the depth images, in radians (1 degree).
 ANGULAR_RESOLUTION = np.radians(1.0)
@@ -46,6 +53,39 @@ def _rays(points: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray
     return ranges, keys
 
 
+class SeenSpace:
+    """What a sensor at the origin saw of a cloud: the nearest range along each ray bin,
+    built once and asked about any number of points.
+
+    Parameters
+    ----------
+    seen : ndarray of shape (m, 3)
+        In the frame of the sensor that saw it, which stands at the origin.
+    resolution : float, default=ANGULAR_RESOLUTION
+        Width of a ray bin, in radians.
+    """
+
+    def __init__(self, seen: np.ndarray, resolution: float = ANGULAR_RESOLUTION) -> None:
+        self.resolution = resolution
+        self.turn = _equator(seen)
+        seen_range, seen_key = _rays(seen @ self.turn.T, resolution)
+        order = np.lexsort((seen_range, seen_key))
+        self.keys, first = np.unique(seen_key[order], return_index=True)
+        self.nearest = seen_range[order][first]
+
+    def violation_share(self, points: np.ndarray, margin: float) -> float:
+        """The share of ``points`` (same frame) nearer to the sensor than what it saw
+        along their rays, of those whose rays it covers (0 when none do); ``margin``:
+        see :func:`violation_share`."""
+        ranges, point_keys = _rays(points @ self.turn.T, self.resolution)
+        at = np.minimum(np.searchsorted(self.keys, point_keys), len(self.keys) - 1)
+        covered = self.keys[at] == point_keys
+        if not covered.any():
+            return 0.0
+        limit = self.nearest[at[covered]] * (1.0 - RANGE_MARGIN) - margin
+        return float(np.mean(ranges[covered] < limit))
+
+
 def violation_share(
     points: np.ndarray,
     seen: np.ndarray,
@@ -69,19 +109,51 @@ def violation_share(
     -------
     float
     """
-    turn = _equator(seen)
-    points, seen = points @ turn.T, seen @ turn.T
-    seen_range, seen_key = _rays(seen, resolution)
-    order = np.lexsort((seen_range, seen_key))
-    keys, first = np.unique(seen_key[order], return_index=True)
-    nearest = seen_range[order][first]
-    ranges, point_keys = _rays(points, resolution)
-    at = np.minimum(np.searchsorted(keys, point_keys), len(keys) - 1)
-    covered = keys[at] == point_keys
-    if not covered.any():
-        return 0.0
-    limit = nearest[at[covered]] * (1.0 - RANGE_MARGIN) - margin
-    return float(np.mean(ranges[covered] < limit))
+    return SeenSpace(seen, resolution).violation_share(points, margin)
+
+
+def free_space_violations(
+    source: np.ndarray,
+    target: np.ndarray,
+    transformations: np.ndarray,
+    source_view: np.ndarray,
+    target_view: np.ndarray,
+    margin: float,
+) -> np.ndarray:
+    """For each transformation, the larger share of either scan it puts in the other
+    sensor's seen free space (:func:`violation_share`, both ways): the same whichever
+    scan is the source. What each sensor saw is binned once for all of them.
+
+    Parameters
+    ----------
+    source, target : ndarray of shape (n, 3), (m, 3)
+        Each in its own coordinates.
+    transformations : ndarray of shape (k, 4, 4)
+        Each maps ``source`` into ``target``'s coordinates.
+    source_view, target_view : ndarray of shape (3,)
+        Where each scan's sensor stood, in that scan's coordinates.
+    margin : float
+        Absolute range margin (see :func:`violation_share`).
+
+    Returns
+    -------
+    ndarray of shape (k,)
+        From 0 (nothing in front of what either sensor saw) to 1.
+    """
+    seen_by_target = SeenSpace(target - target_view)
+    seen_by_source = SeenSpace(source - source_view)
+    shares = []
+    for transformation in transformations:
+        rotation, shift = transformation[:3, :3], transformation[:3, 3]
+        moved = source @ rotation.T + shift - target_view
+        back = (target - shift) @ rotation - source_view  # target into source's coordinates
+        shares.append(
+            max(
+                seen_by_target.violation_share(moved, margin),
+                seen_by_source.violation_share(back, margin),
+            )
+        )
+    return np.array(shares, dtype=np.float64)
 
 
 def free_space_violation(
@@ -92,29 +164,6 @@ def free_space_violation(
     target_view: np.ndarray,
     margin: float,
 ) -> float:
-    """The larger share of either scan that ``transformation`` puts in the other
-    sensor's seen free space (:func:`violation_share`, both ways): the same whichever
-    scan is the source.
-
-    Parameters
-    ----------
-    source, target : ndarray of shape (n, 3), (m, 3)
-        Each in its own coordinates.
-    transformation : ndarray of shape (4, 4)
-        Maps ``source`` into ``target``'s coordinates.
-    source_view, target_view : ndarray of shape (3,)
-        Where each scan's sensor stood, in that scan's coordinates.
-    margin : float
-        Absolute range margin (see :func:`violation_share`).
-
-    Returns
-    -------
-    float
-        From 0 (nothing in front of what either sensor saw) to 1.
-    """
-    rotation, shift = transformation[:3, :3], transformation[:3, 3]
-    moved = source @ rotation.T + shift - target_view
-    into_target = violation_share(moved, target - target_view, margin)
-    back = (target - shift) @ rotation - source_view  # target into source's coordinates
-    into_source = violation_share(back, source - source_view, margin)
-    return max(into_target, into_source)
+    """:func:`free_space_violations` of one transformation (4, 4)."""
+    stack = np.asarray(transformation, dtype=np.float64)[None]
+    return float(free_space_violations(source, target, stack, source_view, target_view, margin)[0])

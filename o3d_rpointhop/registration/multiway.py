@@ -141,14 +141,15 @@ def _register_pair(
         target = o3d.geometry.PointCloud(vectors(target))
         target.normals = vectors(normals)
     screening = views if init is None else None
-    pair = (prepared_source, prepared_target, settings, seed)
-    context = _pair_context(source, target, *pair, screening)
+    context = _pair_context(
+        source, target, prepared_source, prepared_target, settings, seed, screening
+    )
     if init is None:
         transformation, fitness = _screened(context, settings, global_method)
         if min_fitness is not None and fitness < min_fitness:
-            turned_views = None if views is None else views[::-1]
+            back_views = None if views is None else views[::-1]
             back = _pair_context(
-                target, source, prepared_target, prepared_source, settings, seed, turned_views
+                target, source, prepared_target, prepared_source, settings, seed, back_views
             )
             turned, back_fitness = _screened(back, settings, global_method)
             if back_fitness > 0.0:

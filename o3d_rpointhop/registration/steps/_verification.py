@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._utils.cells import CellGrid
-from ..free_space import free_space_violation
+from ..free_space import free_space_violations
 from ._hypotheses import DISTINCT_SHIFT, apart_from, match_support, overlap_score
 from ._trial_icp import refine_point_to_plane
 from .icp import PointToPlaneICP
@@ -75,7 +75,7 @@ def verify(
     max_violation : float, default=None
         With the sensors known (the context's viewpoints), a hypothesis that puts more
         than this share of either cloud where the other's sensor saw empty space
-        (:func:`~o3d_rpointhop.registration.free_space.free_space_violation`) scores 0.
+        (:func:`~o3d_rpointhop.registration.free_space.free_space_violations`) scores 0.
 
     Returns
     -------
@@ -103,13 +103,8 @@ def verify(
     if views is not None and limit is not None:
         # A pose that puts more than ``limit`` of a cloud where the other sensor saw
         # empty space is wrong however well it fits (free_space.py).
-        seen = np.array(
-            [
-                free_space_violation(
-                    source, target, t, views["source"], views["target"], context.voxel_size
-                )
-                for t in refined
-            ]
+        seen = free_space_violations(
+            source, target, refined, views["source"], views["target"], context.voxel_size
         )
         scores = np.where(seen <= limit, scores, 0.0)
     best = int(np.argmax(scores))
