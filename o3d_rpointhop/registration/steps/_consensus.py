@@ -40,6 +40,8 @@ from ._hypotheses import pick_distinct
 from ._refit import refit_while_growing
 
 __all__ = [
+    "PREEMPT_KEEP",
+    "PREEMPT_STRIDE",
     "ConsensusResult",
     "compatibility",
     "compatibility_graphs",
@@ -47,6 +49,16 @@ __all__ = [
     "consensus_sets",
     "truncated_scores",
 ]
+
+
+#: Preemptive scoring: with more than :data:`PREEMPT_KEEP` hypotheses and at least
+#: ``PREEMPT_STRIDE * PREEMPT_MIN_SAMPLE`` matches, every hypothesis is scored on every
+#: ``PREEMPT_STRIDE``-th match and only the ``PREEMPT_KEEP`` best of that on all of
+#: them (Nister's preemptive RANSAC scores the same way). Chosen on the scene model's
+#: training scenes (docs/benchmarks_3dmatch.md, "Preemptive scoring").
+PREEMPT_STRIDE = 8
+PREEMPT_KEEP = 256
+PREEMPT_MIN_SAMPLE = 64
 
 
 @dataclass
@@ -372,6 +384,34 @@ def _seeds(source, degree, n_seeds: int, seed_radius: float | None) -> np.ndarra
     return np.sort(order[:n_seeds])
 
 
+def _ranked(rot, shift, allowed, source, target, sq_threshold, n_threads) -> np.ndarray:
+    """The hypotheses ``allowed`` lets win, best first by their truncated quadratic
+    score over the matches (the first of equal ones). With many of both they are scored
+    preemptively: all on every :data:`PREEMPT_STRIDE`-th match first, then the
+    :data:`PREEMPT_KEEP` best of that on all matches. Those come first, by their exact
+    scores; the others follow by their first scores, which only decide which runners-up
+    are handed on for verification."""
+
+    def scored(which, stride=1):
+        return truncated_scores(
+            np.ascontiguousarray(rot[which].reshape(-1, 9).T),
+            np.ascontiguousarray(shift[which].T),
+            np.ascontiguousarray(source[::stride]),
+            np.ascontiguousarray(target[::stride]),
+            sq_threshold,
+            n_threads,
+        )
+
+    candidates = np.flatnonzero(allowed)
+    if len(candidates) <= PREEMPT_KEEP or len(source) < PREEMPT_STRIDE * PREEMPT_MIN_SAMPLE:
+        return candidates[np.argsort(-scored(candidates), kind="stable")]
+    rough_order = candidates[np.argsort(-scored(candidates, PREEMPT_STRIDE), kind="stable")]
+    kept = np.sort(rough_order[:PREEMPT_KEEP])
+    return np.concatenate(
+        [kept[np.argsort(-scored(kept), kind="stable")], rough_order[PREEMPT_KEEP:]]
+    )
+
+
 def consensus(
     source: np.ndarray,
     target: np.ndarray,
@@ -464,19 +504,10 @@ def consensus(
         members = np.concatenate([seeds[:, None], partners], axis=1)
         weights = np.concatenate([weights.max(axis=1, keepdims=True), weights], axis=1)
         rot, shift = rigid_transforms(source[members], target[members], weights)
-        score = truncated_scores(
-            np.ascontiguousarray(rot.reshape(-1, 9).T),
-            np.ascontiguousarray(shift.T),
-            source,
-            target,
-            float(score_threshold) ** 2,
-            n_threads,
-        )
-        allowed = np.ones(len(score), dtype=bool) if upright is None else upright(rot)
-        # Best score first (the first of equal ones); hypotheses the up prior rejects
-        # cannot win.
-        order = np.argsort(-score, kind="stable")
-        order = order[allowed[order]]
+        # Hypotheses the up prior rejects cannot win.
+        allowed = np.ones(len(rot), dtype=bool) if upright is None else upright(rot)
+        sq_score = float(score_threshold) ** 2
+        order = _ranked(rot, shift, allowed, source, target, sq_score, n_threads)
     hypotheses = np.empty((0, 4, 4))
     if len(seeds) and len(order):
         centroid = source.mean(axis=0)

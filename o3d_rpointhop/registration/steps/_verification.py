@@ -84,8 +84,12 @@ def verify(
     coarse = context.coarse()
     source = np.asarray(coarse.source.points)
     target = np.asarray(coarse.target.points)
-    # The coarse clouds' normals, shared with point-to-plane ICP on the same context.
-    normals = tuple(np.asarray(coarse.with_normals(w).normals) for w in ("source", "target"))
+    # The coarse clouds' normals: with downsampled clouds, the context's own normals of
+    # its global clouds, which the wide passes of a point-to-plane ICP share.
+    level = "global" if context.downsampled else "full"
+    normals = tuple(
+        np.asarray(context.with_normals(w, level).normals) for w in ("source", "target")
+    )
     grids = (CellGrid(source, distance), CellGrid(target, distance))
     if grids[1].on_cells:
         refined = refine_point_to_plane(source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS)
