@@ -112,7 +112,7 @@ def test_steps_compose_a_matcher_and_keep_their_own_parameters(step):
     params = step().get_params(deep=False)
     assert params["matcher"] is None
     assert not set(params) & set(Matcher().get_params())  # no matching option on a step
-    assert len(params) <= 11  # the consensus: its graph, seeds, refit and verification
+    assert len(params) <= 10  # the consensus: its graph, seeds, threads and verification
     chosen = step(matcher=Matcher(metric="cosine"))
     assert chosen.get_params(deep=True)["matcher__metric"] == "cosine"
     copy = clone(chosen)

@@ -15,9 +15,10 @@ largest, densest cluster. The kernel
    (a popcount of two rows), which separates a true cluster from matches that agree
    with the seed by chance; the set is the seed and its ``set_size`` best partners;
 4. fits one rigid motion per set by a weighted SVD (weights: the SC2 scores);
-5. scores every hypothesis on all matches, as the published estimators do, rather than
+5. scores every hypothesis on the matches, as the published estimators do, rather than
    on the whole clouds: a truncated quadratic, ``sum(max(0, 1 - r^2 / tau^2))`` over the
-   residuals ``r`` of the matches;
+   residuals ``r`` of the matches; preemptively when there are many (every hypothesis
+   on an eighth of the matches, the best few hundred of that on all of them);
 6. refits the winner on its inliers while that gathers more of them.
 
 Steps 1, 3 and 5 are compiled (numba, :mod:`o3d_rpointhop._utils.compiled`) and run

@@ -69,9 +69,6 @@ class ConsensusGlobal(GlobalStep):
         dropped; 0 turns it off, ``None`` is the settings' ``seed_distance``.
     set_size : int, default=30
         Partners of a seed in its consensus set.
-    weighted_refit : bool, default=False
-        Weight the final refit's matches by their residual (a truncated quadratic)
-        instead of equally.
     n_jobs : int, default=None
         Threads of the compiled graph, set building and scoring (``None``: every core,
         within ``OMP_NUM_THREADS``, ``threadpoolctl``'s limits, ``joblib.parallel_config``
@@ -97,7 +94,6 @@ class ConsensusGlobal(GlobalStep):
         "n_seeds": [Interval(Integral, 1, None, closed="left")],
         "seed_radius": _OPTIONAL_LENGTH,
         "set_size": [Interval(Integral, 2, None, closed="left")],
-        "weighted_refit": ["boolean"],
         "n_jobs": [None, Integral],
         "n_hypotheses": [*HYPOTHESES, StrOptions({"auto"})],
         "max_violation": [Interval(Real, 0, 1, closed="both"), None],
@@ -113,7 +109,6 @@ class ConsensusGlobal(GlobalStep):
         n_seeds: int = 5000,
         seed_radius: float | None = 0.0,
         set_size: int = 30,
-        weighted_refit: bool = False,
         n_jobs: int | None = None,
         n_hypotheses: int | str = "auto",
         max_violation: float | None = SENSOR_MAX_VIOLATION,
@@ -125,7 +120,6 @@ class ConsensusGlobal(GlobalStep):
         self.n_seeds = n_seeds
         self.seed_radius = seed_radius
         self.set_size = set_size
-        self.weighted_refit = weighted_refit
         self.n_jobs = n_jobs
         self.n_hypotheses = n_hypotheses
         self.max_violation = max_violation
@@ -160,7 +154,6 @@ class ConsensusGlobal(GlobalStep):
             n_seeds=int(self.n_seeds),
             seed_radius=settings.seed_distance if self.seed_radius is None else self.seed_radius,
             set_size=int(self.set_size),
-            weighted_refit=self.weighted_refit,
             upright=None if context.up is None else context.upright,
             n_hypotheses=self._n_hypotheses(context),
             n_threads=kernel_threads(self.n_jobs),

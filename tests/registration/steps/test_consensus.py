@@ -315,3 +315,64 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
     )
     r2 = (((source @ rot.transpose(0, 2, 1)) + shift[:, None] - target) ** 2).sum(axis=2)
     np.testing.assert_allclose(found, np.clip(1 - r2 / 0.3**2, 0, None).sum(axis=1), rtol=1e-12)
+
+
+def test_preemptive_scoring_keeps_the_winner_and_its_runners_up(monkeypatch):
+    """With more seeds than :data:`PREEMPT_KEEP` and enough matches, hypotheses are
+    scored on every PREEMPT_STRIDE-th match first; the winner and the distinct
+    runners-up handed on for verification are those of full scoring here, and the
+    preemption did run (the first pass saw an eighth of the matches)."""
+    from o3d_rpointhop.registration.steps import _consensus
+
+    source, target, truth, _ = synthetic_matches(2400, 0.9, seed=8)
+    kwargs = dict(
+        compatibility_threshold=0.02,
+        inlier_threshold=0.02,
+        score_threshold=0.03,
+        n_seeds=2000,
+        n_hypotheses=4,
+    )
+    sizes = []
+    scores = _consensus.truncated_scores
+
+    def counted(rot, shift, source, target, *args):
+        sizes.append((rot.shape[1], len(source)))
+        return scores(rot, shift, source, target, *args)
+
+    monkeypatch.setattr(_consensus, "truncated_scores", counted)
+    fast = consensus(source, target, **kwargs)
+    assert sizes[0][1] == -(-2400 // _consensus.PREEMPT_STRIDE)  # every stride-th match
+    assert sizes[1] == (_consensus.PREEMPT_KEEP, 2400)  # the kept ones on all of them
+    keep = _consensus.PREEMPT_KEEP
+    monkeypatch.setattr(_consensus, "PREEMPT_KEEP", 10**9)
+    full = consensus(source, target, **kwargs)
+    assert fast.n_hypotheses == full.n_hypotheses > keep
+    np.testing.assert_array_equal(fast.transformation, full.transformation)
+    np.testing.assert_array_equal(fast.hypotheses[0], full.hypotheses[0])
+    assert rotation_error_deg(fast.transformation, truth) < 0.2
+
+
+def test_ranking_puts_the_exactly_scored_first():
+    """The kept hypotheses come first, by their exact scores, even when a rough
+    estimate of another is higher; every allowed hypothesis is ranked once and the
+    ones the up prior refuses not at all."""
+    from o3d_rpointhop.registration.steps._consensus import PREEMPT_KEEP, _ranked
+
+    rng = np.random.default_rng(0)
+    n, m = PREEMPT_KEEP + 300, 2048
+    source = rng.uniform(-1, 1, (m, 3))
+    shifts = rng.normal(scale=0.01, size=(n, 3))
+    target = source.copy()
+    rot = np.tile(np.eye(3), (n, 1, 1))
+    allowed = np.ones(n, dtype=bool)
+    allowed[::7] = False
+    order = _ranked(rot, shifts, allowed, source, target, 0.03**2, 1)
+    assert sorted(order.tolist()) == np.flatnonzero(allowed).tolist()
+    exact = [
+        np.clip(1 - ((source + s - target) ** 2).sum(1) / 0.03**2, 0, None).sum()
+        for s in shifts[order[:PREEMPT_KEEP]]
+    ]
+    assert np.all(np.diff(exact) <= 1e-9)  # the kept ones by exact score
+    # The best hypothesis overall (the smallest shift) is ranked first.
+    best = np.flatnonzero(allowed)[np.argmin(np.linalg.norm(shifts[allowed], axis=1))]
+    assert order[0] == best
