@@ -42,7 +42,7 @@ def add_parser(commands) -> None:
         "(grey for scans without colours beside scans with them; from LAS / LAZ scans to a "
         "LAS / LAZ output, every point dimension: intensity, classification, GPS time, ...), "
         "downsampled only with --output-voxel-size, coloured by scan with --colour-by-scan. "
-        "Scans no other scan overlaps are reported and left out (exit status 3). "
+        "Scans left out of the placed part are named with why (exit status 3). "
         "--voxel-size is the registration's resolution, as register's is.",
     )
     p.add_argument(
@@ -232,9 +232,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if result.frame != 0:
         log.warning(f"{args.scans[0]} is not placed: the poses are in {summary['frame']}'s frame")
-    if result.unconnected:
-        names = ", ".join(summary["unconnected"])
-        log.warning(f"unconnected (left out): {names}")
+    for name, why in summary["left_out"].items():
+        log.warning(f"left out: {name}: {why}")
     if args.view:
         from ..viewer import show_multiway
 

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
+from scipy.spatial import cKDTree
 from sklearn.base import clone
 
 from .._utils.geometry import vectors
@@ -264,19 +265,20 @@ def _candidates(
 ) -> list[tuple[int, int]]:
     """All pairs of a few scans; for many, each scan's ``k`` nearest by its pooled
     (mean, unit-length) descriptor, plus, with ``sequence`` (the scans in the order of
-    their acquisition), each scan's neighbours in it."""
+    their acquisition), each scan's neighbours in it: at most ``(k + 1) n`` pairs,
+    found by a k-d tree in O(n log n) time and O(n k) memory."""
     n = len(features)
     if n <= ALL_PAIRS_UP_TO:
         return [(i, j) for i in range(n) for j in range(i + 1, n)]
     pooled = np.stack([f.mean(axis=0) for f in features])
     pooled /= np.linalg.norm(pooled, axis=1, keepdims=True) + 1e-12
-    distance = np.linalg.norm(pooled[:, None] - pooled[None], axis=2)
-    np.fill_diagonal(distance, np.inf)
+    # k + 1: a scan is its own nearest (or ties with a duplicate of itself).
+    _, nearest = cKDTree(pooled).query(pooled, k=min(k + 1, n))
     sequence = sequence or []
     pairs = {(min(a, b), max(a, b)) for a, b in zip(sequence, sequence[1:], strict=False)}
-    for i in range(n):
-        for j in np.argsort(distance[i], kind="stable")[:k]:
-            pairs.add((min(i, int(j)), max(i, int(j))))
+    for i, row in enumerate(nearest):
+        others = [int(j) for j in row if j != i][:k]
+        pairs.update((min(i, j), max(i, j)) for j in others)
     return sorted(pairs)
 
 
@@ -533,6 +535,8 @@ def register_multiway(
             (min(canon[i], canon[j]), max(canon[i], canon[j])): share
             for (i, j), share in sorted(seen.items())
         },
+        min_fitness=float(min_fitness),
+        max_violation=max_violation,
     )
 
 

@@ -86,6 +86,11 @@ def _model(value: Any) -> dict | None:
     return dict(value)
 
 
+def _optional_float(value: Any) -> float | None:
+    """A saved number, or None when it was not saved."""
+    return None if value is None else float(value)
+
+
 def _pairs(value: Any) -> np.ndarray:
     return np.asarray(value, dtype=np.int64).reshape(-1, 2)
 
@@ -432,6 +437,9 @@ class MultiwayResult:
         ``min_fitness``) when the sensors were known: the share of either scan its pose
         put in space the other's sensor saw empty; pairs above ``max_violation`` were
         left out of the graph. Empty without sensor positions.
+    min_fitness, max_violation : float or None
+        The thresholds the pairs were screened with (None when not known: a result
+        saved before they were kept); :meth:`left_out` explains with them.
     """
 
     poses: list
@@ -446,6 +454,65 @@ class MultiwayResult:
     part_poses: list = field(default_factory=list)
     model: dict | None = None
     free_space: dict = field(default_factory=dict)
+    min_fitness: float | None = None
+    max_violation: float | None = None
+
+    def left_out(self, names: list[str] | None = None) -> dict[int, str]:
+        """Why each scan of :attr:`unconnected` was not placed, in words.
+
+        A scan is left out when it lies in a smaller part than the placed one (its pairs
+        join it only to scans outside the placed part), when none of its pairs fit (edge
+        fitness below ``min_fitness``), when the pairs that fit put too much of a scan
+        where the other's sensor saw empty space (``max_violation``), or when its edges
+        did not survive the pose graph's optimisation.
+
+        Parameters
+        ----------
+        names : list of str, default=None
+            What to call the scans (default: ``"scan k"``).
+
+        Returns
+        -------
+        dict
+            ``{scan index: reason}`` for every unconnected scan.
+        """
+        names = names or [f"scan {k}" for k in range(len(self.poses))]
+        placed = self.parts[0] if self.parts else [k for k, p in enumerate(self.poses) if p]
+        floor = 0.0 if self.min_fitness is None else self.min_fitness
+        limit = 1.0 if self.max_violation is None else self.max_violation
+        reasons = {}
+        for k in self.unconnected:
+            part = next((p for p in self.parts if k in p), [k])
+            own = {pair: f for pair, (_, f) in self.pairs.items() if k in pair}
+            fit = {pair: f for pair, f in own.items() if f >= floor}
+            seen = {pair: self.free_space[pair] for pair in fit if pair in self.free_space}
+            if len(part) > 1 and k not in placed:
+                others = ", ".join(names[j] for j in part if j != k)
+                reasons[k] = (
+                    f"in a smaller part ({len(part)} scans, with {others}) than the placed "
+                    f"one ({len(placed)} scans): no pair that fit joins them"
+                )
+            elif not own:
+                reasons[k] = "paired with no scan"
+            elif not fit:
+                (i, j), best = max(own.items(), key=lambda item: item[1])
+                reasons[k] = (
+                    f"no pair fit: the best, with {names[j if i == k else i]}, has edge "
+                    f"fitness {best:.2f} (at least {floor:.2f} needed)"
+                )
+            elif seen and all(share > limit for share in seen.values()) and len(seen) == len(fit):
+                (i, j), share = min(seen.items(), key=lambda item: item[1])
+                reasons[k] = (
+                    f"every pair that fit puts too much of a scan where the other sensor saw "
+                    f"empty space: the least, with {names[j if i == k else i]}, "
+                    f"{share:.0%} (at most {limit:.0%})"
+                )
+            else:
+                reasons[k] = (
+                    "its edges were dropped from the pose graph: their poses disagree with "
+                    "the rest of the placed part"
+                )
+        return reasons
 
     def merge(
         self,
@@ -558,6 +625,8 @@ class MultiwayResult:
             "part_poses": self.part_poses,
             "model": self.model,
             "free_space": [[i, j, share] for (i, j), share in sorted(self.free_space.items())],
+            "min_fitness": self.min_fitness,
+            "max_violation": self.max_violation,
             "pose_graph": {
                 "nodes": [np.asarray(n.pose) for n in graph.nodes],
                 "edges": [
@@ -614,6 +683,8 @@ class MultiwayResult:
                 free_space={
                     (int(i), int(j)): float(share) for i, j, share in body.get("free_space", [])
                 },
+                min_fitness=_optional_float(body.get("min_fitness")),
+                max_violation=_optional_float(body.get("max_violation")),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{path}: a damaged saved result ({exc!r})") from None
@@ -626,6 +697,7 @@ class MultiwayResult:
             "scans": list(names),
             "poses": [None if p is None else p.tolist() for p in self.poses],
             "unconnected": [names[k] for k in self.unconnected],
+            "left_out": {names[k]: why for k, why in self.left_out(names).items()},
             "frame": names[self.frame],
             "parts": [[names[k] for k in part] for part in self.parts],
             "edges": [[names[i], names[j]] for i, j in self.edges],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,9 @@ def test_reconstruct_command(tmp_path, capsys):
     np.save(tmp_path / "other.npy", make_object(1700, shape_seed=77) * 0.8 + 0.3)
     status = main(["reconstruct", *names, str(tmp_path / "other.npy"), "-o", str(out)])
     assert status == EXIT_UNRELIABLE
-    assert "unconnected (left out)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # The scan of something else is named with why it was left out.
+    assert re.search(r"left out: \S*other\.npy: no pair fit: the best, with \S+, has edge", err)
 
 
 def test_reconstruct_reads_folders_and_patterns_and_keeps_line_k_for_scan_k(tmp_path, capsys):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import open3d as o3d
 import pytest
 from helpers import partial_views
 from scipy.spatial.transform import Rotation
@@ -107,6 +108,31 @@ def test_parallel_pairs_give_the_same_poses():
     two = register_multiway(scans, random_state=0, n_jobs=2)
     assert one.edges == two.edges
     for a, b in zip(one.poses, two.poses, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.slow
+def test_pairs_on_a_dask_cluster_give_the_same_poses():
+    """Screening and refinement as tasks of a Dask cluster of two worker processes
+    (joblib's dask backend): the same edges and the same bytes as one process, and the
+    pairs really ran on the workers."""
+    distributed = pytest.importorskip("distributed")
+    from joblib import parallel_config
+
+    scans, _ = partial_views(3, seed=3)
+    one = register_multiway(scans, random_state=0)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        with parallel_config(backend="dask", n_jobs=-1):
+            on_cluster = register_multiway(scans, random_state=0, n_jobs=-1)
+        ran = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.task_prefixes))
+    assert ran > 0
+    assert one.edges == on_cluster.edges
+    for a, b in zip(one.poses, on_cluster.poses, strict=True):
         np.testing.assert_array_equal(a, b)
 
 
@@ -252,6 +278,33 @@ def test_many_scans_pair_each_with_its_nearest_by_pooled_descriptor_and_its_neig
     ]
 
 
+def test_retrieved_pairs_are_the_nearest_and_scale_to_thousands_of_scans():
+    """Each scan's k nearest by pooled descriptor, as a dense search finds them, and
+    for 3000 scans at most (k + 1) n pairs in memory far below the n^2 a distance
+    matrix takes (here 3000^2 x 32 doubles would be 2.3 GB)."""
+    import tracemalloc
+
+    from o3d_rpointhop.registration.multiway import _candidates
+
+    rng = np.random.default_rng(1)
+    features = [rng.normal(size=(5, 32)) for _ in range(40)]
+    pooled = np.stack([f.mean(axis=0) for f in features])
+    pooled /= np.linalg.norm(pooled, axis=1, keepdims=True)
+    dense = np.linalg.norm(pooled[:, None] - pooled[None], axis=2)
+    np.fill_diagonal(dense, np.inf)
+    expected = {
+        (min(i, j), max(i, j)) for i in range(40) for j in np.argsort(dense[i])[:4].tolist()
+    }
+    assert set(_candidates(features, 4)) == expected
+    many = [rng.normal(size=(5, 32)) for _ in range(3000)]
+    tracemalloc.start()
+    pairs = _candidates(many, 6, list(range(3000)))
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert len(pairs) <= 7 * 3000 and len(set(pairs)) == len(pairs)
+    assert peak < 50e6
+
+
 def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
     """The retrieval path end to end (its threshold lowered so that five scans take it):
     fewer pairs tried than all of them, the given order's neighbours among them, and
@@ -371,3 +424,45 @@ def test_scans_handed_to_workers_as_read_only_memory_maps():
         result = register_multiway(scans, n_jobs=2, random_state=0)
     for k in (1, 2):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
+
+
+def test_every_left_out_scan_is_explained(tmp_path):
+    """Each way a scan can be left out gets its own reason, with the pair and the
+    number behind it, and the reasons survive a save and a load."""
+    eye = np.eye(4)
+    result = MultiwayResult(
+        poses=[eye, eye, eye, None, None, None, None, None, None],
+        pose_graph=None,
+        pairs={
+            (0, 1): (eye, 0.8),
+            (1, 2): (eye, 0.7),
+            (0, 3): (eye, 0.1),  # 3: nothing fit
+            (2, 3): (eye, 0.2),
+            (4, 5): (eye, 0.9),  # 4 and 5: a part of their own
+            (0, 6): (eye, 0.6),  # 6: fit, but through free space
+            (1, 7): (eye, 0.6),  # 7: fit and kept, then dropped by the optimisation
+        },
+        edges=[(0, 1), (1, 2)],
+        unconnected=[3, 4, 5, 6, 7, 8],
+        parts=[[0, 1, 2, 7], [4, 5], [3], [6], [8]],
+        free_space={(0, 1): 0.0, (1, 2): 0.01, (4, 5): 0.0, (0, 6): 0.4, (1, 7): 0.02},
+        min_fitness=0.3,
+        max_violation=0.1,
+    )
+    why = result.left_out()
+    assert set(why) == {3, 4, 5, 6, 7, 8}
+    assert why[3].startswith("no pair fit: the best, with scan 2, has edge fitness 0.20")
+    assert "0.30 needed" in why[3]
+    assert why[4].startswith("in a smaller part (2 scans, with scan 5) than the placed one (4")
+    assert "with scan 4" in why[5]
+    assert "empty space: the least, with scan 0, 40% (at most 10%)" in why[6]
+    assert why[7].startswith("its edges were dropped from the pose graph")
+    assert why[8] == "paired with no scan"
+    named = result.as_dict([f"f{k}.ply" for k in range(9)])["left_out"]
+    assert named["f3.ply"].startswith("no pair fit: the best, with f2.ply")
+    path = tmp_path / "result.json"
+    result.pose_graph = o3d.pipelines.registration.PoseGraph()
+    result.save(path)
+    loaded = MultiwayResult.load(path)
+    assert (loaded.min_fitness, loaded.max_violation) == (0.3, 0.1)
+    assert loaded.left_out() == why
