@@ -19,7 +19,9 @@ from .methods import METHODS
 __all__ = ["TIMING_KEYS", "split_timings", "markdown", "write_split", "write_report"]
 
 #: Keys whose values are wall times or depend on the machine, wherever they occur.
-TIMING_KEYS = frozenset({"seconds", "seconds_per_pair", "fit_seconds", "machine", "thread_budget"})
+TIMING_KEYS = frozenset(
+    {"seconds", "seconds_per_pair", "fit_seconds", "machine", "thread_budget", "peak_memory_gib"}
+)
 
 
 def split_timings(results):
