@@ -20,7 +20,15 @@ __all__ = ["TIMING_KEYS", "split_timings", "markdown", "write_split", "write_rep
 
 #: Keys whose values are wall times or depend on the machine, wherever they occur.
 TIMING_KEYS = frozenset(
-    {"seconds", "seconds_per_pair", "fit_seconds", "machine", "thread_budget", "peak_memory_gib"}
+    {
+        "seconds",
+        "seconds_per_pair",
+        "median_seconds_per_pair",
+        "fit_seconds",
+        "machine",
+        "thread_budget",
+        "peak_memory_gib",
+    }
 )
 
 
@@ -306,7 +314,17 @@ def timings_markdown(results: dict) -> str:
     budget = settings.get("thread_budget")
     threads = f"; {'one thread' if budget == 'one' else 'every core'} each" if budget else ""
     lines += [f"Machine: {settings.get('machine', '?')}{threads}; seed {settings['seed']}.", ""]
-    lines += ["| protocol | method | s per pair |", "|---|---|---|"]
+    medians = any(
+        "median_seconds_per_pair" in s
+        for p in results["protocols"].values()
+        if "angles" not in p
+        for s in p["summary"].values()
+    )
+    if medians:
+        lines += ["| protocol | method | s per pair (mean) | median s per pair |"]
+        lines += ["|---|---|---|---|"]
+    else:
+        lines += ["| protocol | method | s per pair |", "|---|---|---|"]
     for name, protocol in results["protocols"].items():
         summaries = protocol["summary"]
         if "angles" in protocol:  # one summary per angle: the mean over the angles
@@ -314,10 +332,15 @@ def timings_markdown(results: dict) -> str:
             per = {
                 m: np.mean([s[m]["seconds_per_pair"] for s in summaries.values()]) for m in methods
             }
+            median = dict.fromkeys(methods)
         else:
             per = {m: s["seconds_per_pair"] for m, s in summaries.items()}
+            median = {m: s.get("median_seconds_per_pair") for m, s in summaries.items()}
         for method, seconds in per.items():
-            lines.append(f"| {name} | {METHODS[method].description} | {seconds:.3f} |")
+            row = f"| {name} | {METHODS[method].description} | {seconds:.3f} |"
+            if medians:
+                row += " - |" if median[method] is None else f" {median[method]:.3f} |"
+            lines.append(row)
         if "fit_seconds" in protocol:
             lines.append(f"| {name} | model fit | {protocol['fit_seconds']:.1f} (total) |")
     return "\n".join(lines) + "\n"
