@@ -21,7 +21,7 @@ placed, every part reconstructed (``MultiwayResult.part_poses``).
 Writes ``multiway_building.json`` (and ``multiway_building_timings.json``) to
 ``--output``::
 
-    python benchmarks/multiway_building.py [--sizes 64,128,268] [--n-jobs -1]
+    python benchmarks/multiway_building.py [--sizes 64,128,all] [--model auto] [--n-jobs -1]
 """
 
 from __future__ import annotations
@@ -164,6 +164,9 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", default=",".join(TRAINING_SCENES))
     parser.add_argument("--sizes", default="64,128,all", help="tile counts; 'all': every tile")
     parser.add_argument("--n-jobs", type=int, default=-1)
+    parser.add_argument(
+        "--model", default="auto", help="register_multiway's descriptor: auto, object or scene"
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
@@ -177,6 +180,7 @@ def main(argv=None) -> int:
             "overlap": OVERLAP,
             "tolerance": TOLERANCE,
             "n_jobs": args.n_jobs,
+            "model": args.model,
             "seed": args.seed,
             "machine": machine_facts()["machine"],
         },
@@ -187,7 +191,7 @@ def main(argv=None) -> int:
         with PeakMemory() as memory:
             start = time.perf_counter()
             result = register_multiway(
-                tiles[:n], random_state=args.seed, n_jobs=args.n_jobs, progress=False
+                tiles[:n], args.model, random_state=args.seed, n_jobs=args.n_jobs, progress=False
             )
             seconds = time.perf_counter() - start
         kept = {s: {p: v for p, v in t.items()} for s, t in truths.items()}
@@ -201,7 +205,7 @@ def main(argv=None) -> int:
         run = {
             "tiles": n,
             "fragments": len(fragments),
-            "model": (result.model or {}).get("model"),
+            "model": (result.model or {}).get("model", args.model),
             "candidate_pairs": len(result.pairs),
             "pairs_per_tile": round(len(result.pairs) / n, 2),
             "edges_kept": len(result.edges),
