@@ -9,13 +9,13 @@ file format), :mod:`._identity` (what a record calls a descriptor) and the subpa
 :mod:`.pointhop` (the R-PointHop maths, free of scikit-learn).
 """
 
-from ._base import BaseDescriptor
+from ._base import BaseDescriptor, call_with_viewpoints
 from ._fpfh import FEATURE_RADIUS_FACTOR, NORMAL_RADIUS_FACTOR, FPFHTransformer
 from ._identity import descriptor_identity
 from ._persistence import content_hash
 from ._pretrained import PRETRAINED_COMPONENTS, PRETRAINED_MODELS
 from ._rpointhop import RPointHopTransformer
-from ._union import DescriptorUnion
+from ._union import DescriptorUnion, unit_rows
 
 __all__ = [
     "BaseDescriptor",
@@ -26,6 +26,8 @@ __all__ = [
     "PRETRAINED_COMPONENTS",
     "PRETRAINED_MODELS",
     "RPointHopTransformer",
+    "call_with_viewpoints",
     "content_hash",
     "descriptor_identity",
+    "unit_rows",
 ]

@@ -36,8 +36,13 @@ from .._utils.threads import kernel_threads
 from ..registration import ConsensusGlobal, Matcher
 from ..registration.context import RegistrationContext
 from ..registration.result import StepResult
-from ..registration.steps import DESCRIPTOR, MATCHER, GlobalStep
-from ..registration.steps._consensus import compatibility_graphs, consensus_sets
+from ..registration.steps import (
+    DESCRIPTOR,
+    MATCHER,
+    GlobalStep,
+    compatibility_graphs,
+    consensus_sets,
+)
 from ..transforms import from_centred, rigid_transforms
 
 __all__ = ["SC2PCRGlobal", "sc2pcr"]

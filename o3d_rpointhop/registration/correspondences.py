@@ -12,7 +12,7 @@ import open3d as o3d
 from .._utils.compiled import kernel
 from .._utils.kdtree import insert_ranked
 from .._utils.params import Interval, validate_params
-from ..descriptors._union import unit_rows
+from ..descriptors import unit_rows
 
 __all__ = [
     "SALIENT_NEIGHBOURS",

@@ -39,7 +39,7 @@ from .._utils.parallel import parallel_map, worker_copy
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
 from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints, renamed_seed
-from ..descriptors._pretrained import PRETRAINED_MODELS
+from ..descriptors import PRETRAINED_MODELS
 from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext

@@ -22,7 +22,7 @@ from .._utils.params import (
 )
 from .._utils.threads import core_budget
 from .._utils.validation import check_rigid_transformation, renamed_seed
-from ..descriptors._pretrained import PRETRAINED_MODELS
+from ..descriptors import PRETRAINED_MODELS
 from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .defaults import default_descriptor, resolve_global_method

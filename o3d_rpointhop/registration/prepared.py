@@ -18,7 +18,7 @@ import numpy as np
 import open3d as o3d
 
 from .._utils.geometry import vectors
-from ..descriptors._base import call_with_viewpoints
+from ..descriptors import call_with_viewpoints
 
 __all__ = [
     "NORMAL_NEIGHBOURS",
