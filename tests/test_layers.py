@@ -195,6 +195,38 @@ def test_the_check_finds_private_names_not_private_modules():
     ]
 
 
+def private_modules_across_rooms(graph: dict[str, set[str]]) -> list[str]:
+    """Every import of a private module (a path part with a leading underscore) of
+    another room (top-level subpackage): a room's private modules are its own. The
+    ground floor (``_utils``, ``_version``) is shared by every room."""
+    bad = []
+    for module, targets in sorted(graph.items()):
+        room = module.split(".")[1] if "." in module else ""
+        for target in sorted(targets):
+            parts = target.split(".")[1:]
+            if not parts or parts[0] in ("_utils", "_version") or parts[0] == room:
+                continue
+            if any(p.startswith("_") and not p.startswith("__") for p in parts[1:]):
+                bad.append(f"{module} imports {target}, private to {parts[0]}")
+    return bad
+
+
+def test_no_private_module_crosses_a_room():
+    assert private_modules_across_rooms(import_graph()) == []
+
+
+def test_the_check_finds_private_modules_of_other_rooms():
+    graph = {
+        f"{TOP}.evaluation.sc2pcr": {f"{TOP}.registration.steps._consensus"},
+        f"{TOP}.registration.steps.consensus": {f"{TOP}.registration.steps._consensus"},
+        f"{TOP}.cli.register": {f"{TOP}._utils.threads", f"{TOP}.registration"},
+    }
+    assert private_modules_across_rooms(graph) == [
+        f"{TOP}.evaluation.sc2pcr imports {TOP}.registration.steps._consensus, private to "
+        "registration"
+    ]
+
+
 def test_no_import_cycles():
     # A type checker's import (under TYPE_CHECKING) runs against the layers like any
     # other, but never executes, so it cannot close a cycle.
