@@ -57,7 +57,7 @@ def nearest_one(qx, qy, qz, points, starts, lo, inv_cell, dims, sq_radius):  # p
     return best, found
 
 
-@kernel()
+@kernel(nogil=True)
 def _nearest_in_cells(
     queries, points, starts, lo, inv_cell, dims, sq_radius
 ):  # pragma: no cover - compiled

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._utils.threads import map_threads
+
 __all__ = [
     "ANGULAR_RESOLUTION",
     "RANGE_MARGIN",
@@ -119,10 +121,12 @@ def free_space_violations(
     source_view: np.ndarray,
     target_view: np.ndarray,
     margin: float,
+    n_threads: int = 1,
 ) -> np.ndarray:
     """For each transformation, the larger share of either scan it puts in the other
     sensor's seen free space (:func:`violation_share`, both ways): the same whichever
-    scan is the source. What each sensor saw is binned once for all of them.
+    scan is the source. What each sensor saw is binned once for all of them; the
+    transformations are shared out over ``n_threads`` threads (each measured alone).
 
     Parameters
     ----------
@@ -134,6 +138,7 @@ def free_space_violations(
         Where each scan's sensor stood, in that scan's coordinates.
     margin : float
         Absolute range margin (see :func:`violation_share`).
+    n_threads : int, default=1
 
     Returns
     -------
@@ -142,18 +147,19 @@ def free_space_violations(
     """
     seen_by_target = SeenSpace(target - target_view)
     seen_by_source = SeenSpace(source - source_view)
-    shares = []
-    for transformation in transformations:
-        rotation, shift = transformation[:3, :3], transformation[:3, 3]
+    shares = np.empty(len(transformations), dtype=np.float64)
+
+    def measure(k: int) -> None:
+        rotation, shift = transformations[k][:3, :3], transformations[k][:3, 3]
         moved = source @ rotation.T + shift - target_view
         back = (target - shift) @ rotation - source_view  # target into source's coordinates
-        shares.append(
-            max(
-                seen_by_target.violation_share(moved, margin),
-                seen_by_source.violation_share(back, margin),
-            )
+        shares[k] = max(
+            seen_by_target.violation_share(moved, margin),
+            seen_by_source.violation_share(back, margin),
         )
-    return np.array(shares, dtype=np.float64)
+
+    map_threads(measure, [(k,) for k in range(len(transformations))], n_threads)
+    return shares
 
 
 def free_space_violation(

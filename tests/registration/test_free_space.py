@@ -86,3 +86,21 @@ def test_the_consensus_verifies_more_hypotheses_when_the_sensors_are_known():
     assert 1 < len(scores) <= SENSOR_HYPOTHESES
     blind = register(source, target, "scene", viewpoints=None)
     assert "hypothesis_scores" not in blind.steps[0].info  # one hypothesis, not verified
+
+
+def test_many_poses_on_threads_give_the_same_shares():
+    """free_space_violations measures each pose alone: any thread count, the same
+    shares, each equal to the one-pose function's."""
+    from o3d_rpointhop.registration.free_space import free_space_violations
+    from o3d_rpointhop.transforms import random_rigid_motion
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform([-2, -2, 1], [2, 2, 4], (3000, 3))
+    poses = np.stack([random_rigid_motion(k, 0.5) for k in range(5)])
+    views = (np.zeros(3), np.zeros(3))
+    one = free_space_violations(points, points, poses, *views, 0.02)
+    two = free_space_violations(points, points, poses, *views, 0.02, n_threads=2)
+    assert one.tobytes() == two.tobytes()
+    singles = [free_space_violation(points, points, t, *views, 0.02) for t in poses]
+    np.testing.assert_array_equal(one, singles)
+    assert one.max() > 0  # the moved poses do put points in front

@@ -9,6 +9,7 @@ from numbers import Integral, Real
 import numpy as np
 
 from ..._utils.params import HasMethods, Interval
+from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..correspondences import Correspondences
 from ..matching import Matcher
@@ -88,6 +89,9 @@ class GlobalStep(RegistrationStep):
     #: Free-space limit of the hypotheses' verification (a step that has the parameter
     #: sets it; :func:`~._verification.verify`).
     max_violation: float | None = None
+    #: Threads of the verification (a step that has the parameter sets it; ``None``:
+    #: every core, as :func:`~o3d_rpointhop._utils.threads.kernel_threads` reads it).
+    n_jobs: int | None = None
 
     @classmethod
     def default_matcher(cls) -> Matcher:
@@ -143,7 +147,8 @@ class GlobalStep(RegistrationStep):
         if len(hypotheses) < 2:
             return estimate, {}
         matched = GlobalStep._matched(context, corr)
-        check = verify(context, hypotheses, distance, matched, self.max_violation)
+        threads = kernel_threads(self.n_jobs)
+        check = verify(context, hypotheses, distance, matched, self.max_violation, threads)
         info = {
             "hypothesis_scores": [round(float(s), 6) for s in check.scores],
             "chosen_hypothesis": check.best,

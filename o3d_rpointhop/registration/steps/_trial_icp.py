@@ -18,6 +18,7 @@ import numpy as np
 
 from ..._utils.cells import CellGrid, nearest_one
 from ..._utils.compiled import kernel
+from ..._utils.threads import run_blocks
 
 __all__ = ["refine_point_to_plane"]
 
@@ -159,20 +160,32 @@ def refine_point_to_plane(
     target_normals: np.ndarray,
     hypotheses: np.ndarray,
     max_iteration: int,
+    n_threads: int = 1,
 ) -> np.ndarray:
     """Refine every pose of ``hypotheses`` (k, 4, 4) of ``source`` (n, 3) onto the
     target behind ``grid`` (a :class:`CellGrid` of the target points, its radius the
     correspondence distance, :attr:`~CellGrid.on_cells`) with the target's unit
     ``target_normals`` (in the target's row order), by at most ``max_iteration``
     point-to-plane ICP iterations each. A pose with fewer than six correspondences, or
-    whose correspondences cannot fix all six motions, stays as it is."""
+    whose correspondences cannot fix all six motions, stays as it is. The poses are
+    shared out over ``n_threads`` threads; each is refined alone, so the result does
+    not depend on the thread count."""
     normals = np.ascontiguousarray(target_normals[grid.order], dtype=np.float64)
-    return _refine_all(
-        np.ascontiguousarray(source, dtype=np.float64),
-        np.ascontiguousarray(hypotheses, dtype=np.float64),
-        *grid.kernel_arguments(),
-        normals,
-        int(max_iteration),
-        RELATIVE_FITNESS,
-        RELATIVE_RMSE,
-    )
+    source = np.ascontiguousarray(source, dtype=np.float64)
+    hypotheses = np.ascontiguousarray(hypotheses, dtype=np.float64)
+    refined = np.empty_like(hypotheses)
+    arguments = grid.kernel_arguments()
+
+    def refine(start: int, stop: int) -> None:
+        refined[start:stop] = _refine_all(
+            source,
+            hypotheses[start:stop],
+            *arguments,
+            normals,
+            int(max_iteration),
+            RELATIVE_FITNESS,
+            RELATIVE_RMSE,
+        )
+
+    run_blocks(refine, len(hypotheses), n_threads)
+    return refined

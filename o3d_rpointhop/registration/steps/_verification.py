@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._utils.cells import CellGrid
+from ..._utils.threads import map_threads
 from ..free_space import free_space_violations
 from ._hypotheses import DISTINCT_SHIFT, apart_from, match_support, overlap_score
 from ._trial_icp import refine_point_to_plane
@@ -55,6 +56,7 @@ def verify(
     distance: float,
     matched: tuple[np.ndarray, np.ndarray],
     max_violation: float | None = None,
+    n_threads: int = 1,
 ) -> Verification:
     """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
     global clouds within ``distance`` and score it by its :func:`overlap_score` (with
@@ -76,6 +78,9 @@ def verify(
         With the sensors known (the context's viewpoints), a hypothesis that puts more
         than this share of either cloud where the other's sensor saw empty space
         (:func:`~o3d_rpointhop.registration.free_space.free_space_violations`) scores 0.
+    n_threads : int, default=1
+        Threads the hypotheses are shared out over (each is refined and scored alone:
+        the result does not depend on it).
 
     Returns
     -------
@@ -92,23 +97,32 @@ def verify(
     )
     grids = (CellGrid(source, distance), CellGrid(target, distance))
     if grids[1].on_cells:
-        refined = refine_point_to_plane(source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS)
+        refined = refine_point_to_plane(
+            source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS, n_threads
+        )
     else:  # a cloud too wide for a grid at this distance: Open3D's ICP
         icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
         refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
-    scores = np.array(
-        [
-            overlap_score(source, target, t, distance, normals, grids)
-            * match_support(matched, t, distance)
-            for t in refined
-        ]
-    )
+    scores = np.empty(len(refined))
+
+    def score(k: int) -> None:
+        t = refined[k]
+        overlap = overlap_score(source, target, t, distance, normals, grids)
+        scores[k] = overlap * match_support(matched, t, distance)
+
+    map_threads(score, [(k,) for k in range(len(refined))], n_threads)
     views, limit = context.viewpoints, max_violation
     if views is not None and limit is not None:
         # A pose that puts more than ``limit`` of a cloud where the other sensor saw
         # empty space is wrong however well it fits (free_space.py).
         seen = free_space_violations(
-            source, target, refined, views["source"], views["target"], context.voxel_size
+            source,
+            target,
+            refined,
+            views["source"],
+            views["target"],
+            context.voxel_size,
+            n_threads=n_threads,
         )
         scores = np.where(seen <= limit, scores, 0.0)
     best = int(np.argmax(scores))

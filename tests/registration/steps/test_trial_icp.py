@@ -90,3 +90,14 @@ def test_a_grid_searched_by_a_tree_has_no_kernel_arguments(monkeypatch):
         grid.kernel_arguments()
     with pytest.raises(ValueError, match="k-d tree"):
         _ = grid.order
+
+
+def test_threads_share_the_poses_and_change_no_byte():
+    source, target = _pair(2)
+    starts = _starts(np.eye(4), 7, seed=3)
+    grid = CellGrid(np.asarray(target.points), 0.1)
+    normals = np.asarray(target.normals)
+    one = refine_point_to_plane(source, grid, normals, starts, 15, n_threads=1)
+    for threads in (2, 3, 8):
+        many = refine_point_to_plane(source, grid, normals, starts, 15, n_threads=threads)
+        assert many.tobytes() == one.tobytes()
