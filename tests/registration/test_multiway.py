@@ -218,7 +218,9 @@ def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(
     stated.registration_global_method_ = "consensus"
     stated.registration_points_ = 1500
     result = register_multiway(scans, stated, random_state=0)
-    assert ran == [ConsensusGlobal] * 3 and sizes == [1500]
+    # Three pairs, each screened by the consensus (one the other way too, should its
+    # first way fall below the edge fitness).
+    assert set(ran) == {ConsensusGlobal} and 3 <= len(ran) <= 6 and sizes == [1500]
     for k in (1, 2):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
     ran.clear()
