@@ -20,7 +20,7 @@ from pathlib import Path
 from o3d_rpointhop import RPointHopTransformer, register_multiway
 from o3d_rpointhop.datasets.threedmatch import threedmatch_root
 from o3d_rpointhop.evaluation.provenance import descriptor_provenance
-from o3d_rpointhop.evaluation.report import split_timings
+from o3d_rpointhop.evaluation.report import write_split
 from o3d_rpointhop.evaluation.rooms import pairs_registered, scene_data
 from o3d_rpointhop.evaluation.scene_models import TRAINING_SCENES
 
@@ -93,13 +93,7 @@ def main(argv=None) -> int:
         "| **all** | " + " | ".join(f"{totals[c][0]} / {totals[c][1]}" for c in candidates) + " |"
     )
     text = "\n".join(lines) + "\n"
-    kept, timed = split_timings(out)
-    args.output.mkdir(parents=True, exist_ok=True)
-    (args.output / "free_space_selection.json").write_text(json.dumps(kept, indent=1) + "\n")
-    (args.output / "free_space_selection_timings.json").write_text(
-        json.dumps(timed, indent=1) + "\n"
-    )
-    (args.output / "free_space_selection.md").write_text(text)
+    write_split(out, args.output, "free_space_selection", lambda kept: text)
     print(text)
     return 0
 

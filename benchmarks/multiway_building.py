@@ -38,7 +38,7 @@ from o3d_rpointhop import register_multiway
 from o3d_rpointhop.datasets.threedmatch import threedmatch_root
 from o3d_rpointhop.evaluation._common import machine_facts
 from o3d_rpointhop.evaluation.provenance import multiway_provenance
-from o3d_rpointhop.evaluation.report import split_timings
+from o3d_rpointhop.evaluation.report import write_split
 from o3d_rpointhop.evaluation.rooms import pairs_registered, scene_data
 from o3d_rpointhop.evaluation.scene_models import TRAINING_SCENES
 from o3d_rpointhop.transforms import apply_transform, random_rigid_motion, rotation_error_deg
@@ -194,14 +194,11 @@ def main(argv=None) -> int:
                 tiles[:n], args.model, random_state=args.seed, n_jobs=args.n_jobs, progress=False
             )
             seconds = time.perf_counter() - start
-        kept = {s: {p: v for p, v in t.items()} for s, t in truths.items()}
         fragments = {owner[k] for k in range(n)}
-        for scene in kept:  # the pairs whose two fragments have tiles in this run
-            kept[scene] = {
-                p: v
-                for p, v in kept[scene].items()
-                if (scene, p[0]) in fragments and (scene, p[1]) in fragments
-            }
+        kept = {  # the pairs whose two fragments have tiles in this run
+            scene: {p: v for p, v in truth.items() if {(scene, p[0]), (scene, p[1])} <= fragments}
+            for scene, truth in truths.items()
+        }
         run = {
             "tiles": n,
             "fragments": len(fragments),
@@ -216,12 +213,8 @@ def main(argv=None) -> int:
         }
         out["runs"].append(run)
         print(json.dumps(run), flush=True)
-    args.output.mkdir(parents=True, exist_ok=True)
     out["provenance"] = multiway_provenance(["rpointhop"])
-    kept_out, timed = split_timings(out)
-    (args.output / "multiway_building.json").write_text(json.dumps(kept_out, indent=1) + "\n")
-    timings = args.output / "multiway_building_timings.json"
-    timings.write_text(json.dumps(timed, indent=1) + "\n")
+    write_split(out, args.output, "multiway_building")
     return 0
 
 

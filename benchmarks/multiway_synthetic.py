@@ -27,7 +27,7 @@ from o3d_rpointhop.datasets import make_object
 from o3d_rpointhop.evaluation._common import machine_facts
 from o3d_rpointhop.evaluation.protocols import crop_nearest
 from o3d_rpointhop.evaluation.provenance import multiway_provenance
-from o3d_rpointhop.evaluation.report import split_timings
+from o3d_rpointhop.evaluation.report import write_split
 from o3d_rpointhop.transforms import apply_transform, random_rigid_motion, rotation_error_deg
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -88,12 +88,8 @@ def main(argv=None) -> int:
             "max_mean_point_error": round(max(gap), 4) if gap else None,
         }
         print(method, json.dumps(out["methods"][method]), flush=True)
-    args.output.mkdir(parents=True, exist_ok=True)
     out["provenance"] = multiway_provenance(["rpointhop", "fpfh"])
-    kept, timed = split_timings(out)
-    (args.output / "multiway_synthetic.json").write_text(json.dumps(kept, indent=1) + "\n")
-    timings = args.output / "multiway_synthetic_timings.json"
-    timings.write_text(json.dumps(timed, indent=1) + "\n")
+    write_split(out, args.output, "multiway_synthetic")
     return 0
 
 

@@ -31,7 +31,7 @@ from o3d_rpointhop import RPointHopTransformer, register_multiway
 from o3d_rpointhop.datasets.threedmatch import threedmatch_root
 from o3d_rpointhop.evaluation._common import machine_facts
 from o3d_rpointhop.evaluation.provenance import descriptor_provenance
-from o3d_rpointhop.evaluation.report import split_timings
+from o3d_rpointhop.evaluation.report import write_split
 from o3d_rpointhop.evaluation.rooms import RECALL_RMSE, pairs_registered, scene_data
 from o3d_rpointhop.transforms import rotation_error_deg
 
@@ -152,10 +152,7 @@ def main(argv=None) -> int:
     out["provenance"] = descriptor_provenance(
         {f"rpointhop-{m}": RPointHopTransformer.pretrained(m) for m in models}
     )
-    kept, timed = split_timings(out)
-    args.output.mkdir(parents=True, exist_ok=True)
-    (args.output / "rooms_order.json").write_text(json.dumps(kept, indent=1) + "\n")
-    (args.output / "rooms_order_timings.json").write_text(json.dumps(timed, indent=1) + "\n")
+    write_split(out, args.output, "rooms_order")
     return 0
 
 

@@ -381,17 +381,22 @@ def _overlap_plot(results: dict, figure_class, folder: Path, stem: str) -> list[
     return [str(path)]
 
 
-def write_split(results: dict, folder: Path, stem: str, markdown_of, timings_markdown_of):
-    """Write ``<stem>.json`` / ``<stem>.md`` without the timings (unchanged by a rerun)
-    and ``<stem>_timings.json`` / ``<stem>_timings.md`` with them; return the paths.
-    ``markdown_of`` renders the results, ``timings_markdown_of`` their wall times."""
+def write_split(
+    results: dict, folder: Path, stem: str, markdown_of=None, timings_markdown_of=None
+) -> list[str]:
+    """Write ``<stem>.json`` without the timings (unchanged by a rerun) and
+    ``<stem>_timings.json`` with them, in ``folder`` (made if missing); return the
+    paths. ``markdown_of`` renders the results as ``<stem>.md``, ``timings_markdown_of``
+    their wall times as ``<stem>_timings.md`` (each only when given)."""
     kept, timed = split_timings(results)
-    texts = {
-        f"{stem}.json": json.dumps(kept, indent=1, default=float) + "\n",
-        f"{stem}.md": markdown_of(kept),
-        f"{stem}_timings.json": json.dumps(timed, indent=1, default=float) + "\n",
-        f"{stem}_timings.md": timings_markdown_of(results),
-    }
+    texts = {f"{stem}.json": json.dumps(kept, indent=1, default=float) + "\n"}
+    if markdown_of is not None:
+        texts[f"{stem}.md"] = markdown_of(kept)
+    texts[f"{stem}_timings.json"] = json.dumps(timed, indent=1, default=float) + "\n"
+    if timings_markdown_of is not None:
+        texts[f"{stem}_timings.md"] = timings_markdown_of(results)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
     for name, text in texts.items():
         (folder / name).write_text(text)
     return [str(folder / name) for name in texts]
