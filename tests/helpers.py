@@ -3,6 +3,7 @@ estimator checks with the list of those that cannot apply to a point-cloud trans
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -170,6 +171,35 @@ def partial_views(n_scans: int, seed: int = 0, n_points: int = 2400):
         scans.append(apply_transform(view, motion))
         poses.append(np.linalg.inv(motion))  # back into the object's (= scan 0's) frame
     return scans, poses
+
+
+@contextmanager
+def dask_cluster():
+    """A Dask ``LocalCluster`` of two single-threaded worker processes and its client
+    (skipped without ``distributed``), with joblib's dask backend on every core inside.
+    The process's environment is restored afterwards: the cluster leaves
+    ``OMP_NUM_THREADS=1`` in it (its nannies' pre-spawn-environ), which would put every
+    later test on one thread."""
+    import os
+
+    import pytest
+
+    distributed = pytest.importorskip("distributed")
+    from joblib import parallel_config
+
+    environ = dict(os.environ)
+    try:
+        with (
+            distributed.LocalCluster(
+                n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+            ) as cluster,
+            distributed.Client(cluster) as client,
+            parallel_config(backend="dask", n_jobs=-1),
+        ):
+            yield client
+    finally:
+        os.environ.clear()
+        os.environ.update(environ)
 
 
 def free_port() -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
+from helpers import dask_cluster
 
 from o3d_rpointhop import RPointHopTransformer, register
 from o3d_rpointhop.batch import register_many, transform_many
@@ -51,21 +52,12 @@ def test_register_many_names_a_bad_pair(clouds):
 
 @pytest.mark.slow
 def test_batch_api_runs_on_a_dask_localcluster(model, clouds):
-    distributed = pytest.importorskip("distributed")
-    from joblib import parallel_config
-
     expected = [model.transform(c) for c in clouds]
     pairs = [(clouds[0] + 0.1, clouds[0])]
     alone = register(*pairs[0], random_state=0)
-    with (
-        distributed.LocalCluster(
-            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
-        ) as cluster,
-        distributed.Client(cluster) as client,
-    ):
-        with parallel_config(backend="dask", n_jobs=-1):
-            got = transform_many(model, clouds)
-            results = register_many(pairs, random_state=0)
+    with dask_cluster() as client:
+        got = transform_many(model, clouds)
+        results = register_many(pairs, random_state=0)
         # The work really ran on the cluster's workers.
         assert sum(len(v) for v in client.run(lambda: [1]).values()) == 2
         assert client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.task_prefixes)) > 0

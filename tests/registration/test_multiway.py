@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
-from helpers import partial_views
+from helpers import dask_cluster, partial_views
 from scipy.spatial.transform import Rotation
 
 from o3d_rpointhop import register_multiway
@@ -116,19 +116,10 @@ def test_pairs_on_a_dask_cluster_give_the_same_poses():
     """Screening and refinement as tasks of a Dask cluster of two worker processes
     (joblib's dask backend): the same edges and the same bytes as one process, and the
     pairs really ran on the workers."""
-    distributed = pytest.importorskip("distributed")
-    from joblib import parallel_config
-
     scans, _ = partial_views(3, seed=3)
     one = register_multiway(scans, random_state=0)
-    with (
-        distributed.LocalCluster(
-            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
-        ) as cluster,
-        distributed.Client(cluster) as client,
-    ):
-        with parallel_config(backend="dask", n_jobs=-1):
-            on_cluster = register_multiway(scans, random_state=0, n_jobs=-1)
+    with dask_cluster() as client:
+        on_cluster = register_multiway(scans, random_state=0, n_jobs=-1)
         ran = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.task_prefixes))
     assert ran > 0
     assert one.edges == on_cluster.edges
