@@ -13,7 +13,7 @@ from ..._utils.cells import CellGrid
 from ..._utils.threads import map_threads
 from ..free_space import free_space_violations
 from ._hypotheses import DISTINCT_SHIFT, apart_from, match_support, overlap_score
-from ._trial_icp import refine_point_to_plane
+from ._point_to_plane import refine_point_to_plane
 from .icp import PointToPlaneICP
 
 __all__ = ["REFINE_ITERATIONS", "SWITCH_MARGIN", "Verification", "verify"]

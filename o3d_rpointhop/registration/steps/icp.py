@@ -1,8 +1,10 @@
-"""ICP refinements: point-to-point, point-to-plane, generalized and multi-scale, by Open3D.
+"""ICP refinements: point-to-point, point-to-plane, generalized and multi-scale.
 
 Each starts from the incoming transformation and runs Open3D's ICP, repeatably (one
-thread), with correspondence distances from the step's parameters or, when they are
-``None``, from ``context.settings`` (``icp_distances``: 2 then 0.5 resolutions).
+thread), or, for point-to-plane without a robust loss, the same iteration compiled on
+every core (:mod:`._point_to_plane`), with correspondence distances from the step's
+parameters or, when they are ``None``, from ``context.settings`` (``icp_distances``: 2
+then 0.5 resolutions).
 
 A narrower pass is kept only if it does not lose coverage: when its result brings
 :data:`COVERAGE_DROP` or more of the source fewer points within the previous pass's
@@ -22,11 +24,13 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from ..._utils.cells import CellGrid
 from ..._utils.params import Interval, StrOptions
-from ..._utils.threads import repeatable_open3d
+from ..._utils.threads import kernel_threads, repeatable_open3d
 from ..context import RegistrationContext
 from ..result import StepResult
 from ._base import RegistrationStep
+from ._point_to_plane import point_to_plane_icp
 
 __all__ = ["PointToPointICP", "PointToPlaneICP", "GeneralizedICP", "MultiScaleICP"]
 
@@ -230,7 +234,10 @@ class PointToPlaneICP(_ICPStep):
     """Point-to-plane ICP (Chen and Medioni, 1992) on the full-resolution clouds.
 
     Target normals are estimated (radius: the settings' ``normal_radius``, 2 x
-    ``voxel_size``) when the target has none.
+    ``voxel_size``) when the target has none. Without a robust ``kernel`` each pass is
+    Open3D's iteration compiled and shared out over every core, with the same result
+    on any thread count (a target too wide for a grid of cells as wide as the distance
+    falls back to Open3D's ICP on one thread).
 
     Parameters
     ----------
@@ -278,6 +285,21 @@ class PointToPlaneICP(_ICPStep):
         kernel = _robust_kernel(self.kernel, self.kernel_scale, distance)
         source = context.cloud_at("source", which)
         target = context.with_normals("target", which)
+        if kernel is None:
+            # Without a robust loss: the compiled ICP, on every core with the same
+            # result (_point_to_plane.py), unless the target is too wide for its grid.
+            grid = CellGrid(np.asarray(target.points), distance)
+            if grid.on_cells:
+                return point_to_plane_icp(
+                    np.asarray(source.points),
+                    grid,
+                    np.asarray(target.normals),
+                    np.asarray(init, dtype=np.float64),
+                    int(self.max_iteration),
+                    float(self.relative_fitness),
+                    float(self.relative_rmse),
+                    kernel_threads(None),
+                )
         return _icp(
             self.name,
             source,
