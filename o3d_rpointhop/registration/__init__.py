@@ -15,7 +15,7 @@ from .checks import RegistrationWarning
 from .context import RegistrationContext
 from .correspondences import Correspondences, find_correspondences
 from .evaluate import evaluate
-from .matching import Matcher
+from .matching import Matcher, PooledMatcher
 from .multiway import register_multiway
 from .pipeline import RegistrationPipeline, register
 from .result import MultiwayResult, RegistrationResult, StepResult
@@ -44,6 +44,7 @@ __all__ = [
     "MultiwayResult",
     "PointToPlaneICP",
     "PointToPointICP",
+    "PooledMatcher",
     "RANSACGlobal",
     "RegistrationContext",
     "RegistrationPipeline",

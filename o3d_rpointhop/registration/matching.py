@@ -13,6 +13,7 @@ step's default matcher (:meth:`GlobalStep.default_matcher
 from __future__ import annotations
 
 from numbers import Integral, Real
+from typing import Any
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -30,7 +31,7 @@ from .correspondences import (
     unit_rows,
 )
 
-__all__ = ["Matcher"]
+__all__ = ["Matcher", "PooledMatcher"]
 
 
 class Matcher(BaseEstimator):
@@ -276,3 +277,82 @@ def _enough(who: str, count: int, what: str, remedy: str) -> None:
     counted and what to relax."""
     if count < 3:
         raise ValueError(f"{who}: only {count} {what}; at least 3 are needed ({remedy})")
+
+
+class PooledMatcher(BaseEstimator):
+    """The matches of several descriptors pooled into one set for one global step.
+
+    Each part matches both clouds with its own descriptor and :class:`Matcher`; a pair
+    of points found by several parts is kept once, as the first part found it. A true
+    correspondence that one descriptor misses (R-PointHop's frames on a flat wall, an
+    FPFH histogram that repeats) may be another's, so a consensus over the pool finds
+    more pairs that overlap little than either part alone (docs/registration.md,
+    "Pooled matches").
+
+    Parameters
+    ----------
+    parts : list of (str, transformer or None, Matcher)
+        Each part's name, descriptor (``None``: the step's own, else the pipeline's)
+        and matcher. Names are distinct; two parts may share a descriptor.
+
+    Examples
+    --------
+    >>> from o3d_rpointhop import ConsensusGlobal, FPFHTransformer
+    >>> from o3d_rpointhop.registration import Matcher, PooledMatcher
+    >>> pooled = PooledMatcher(
+    ...     [
+    ...         ("model", None, Matcher(both_directions=True, max_matches=4000)),
+    ...         ("fpfh", FPFHTransformer(), Matcher(both_directions=True, max_matches=2000)),
+    ...     ]
+    ... )
+    >>> step = ConsensusGlobal(matcher=pooled)
+    """
+
+    def __init__(self, parts: list) -> None:
+        self.parts = parts
+
+    def validate(self) -> None:
+        """Check the parts and each part's matcher.
+
+        Raises
+        ------
+        ValueError
+            Naming the first bad part.
+        """
+        if not isinstance(self.parts, (list, tuple)) or not self.parts:
+            raise ValueError(f"PooledMatcher: parts must be a non-empty list, got {self.parts!r}")
+        names = set()
+        for part in self.parts:
+            if not (isinstance(part, tuple) and len(part) == 3):
+                raise ValueError(
+                    f"PooledMatcher: each part is (name, descriptor or None, Matcher), got {part!r}"
+                )
+            name, descriptor, matcher = part
+            if not isinstance(name, str) or name in names:
+                raise ValueError(
+                    f"PooledMatcher: part names must be distinct strings, got {name!r}"
+                )
+            names.add(name)
+            if descriptor is not None and not hasattr(descriptor, "transform"):
+                raise ValueError(
+                    f"PooledMatcher: part {name!r}'s descriptor has no transform: {descriptor!r}"
+                )
+            if not isinstance(matcher, Matcher):
+                raise ValueError(f"PooledMatcher: part {name!r}'s matcher is not a Matcher")
+            matcher.validate()
+
+    def descriptors(self, own: Any) -> list[tuple[Any, Matcher]]:
+        """Each part's descriptor (``own`` for ``None``) and matcher, in order."""
+        return [(own if d is None else d, m) for _, d, m in self.parts]
+
+    @staticmethod
+    def pool(found: list[Correspondences]) -> Correspondences:
+        """Several parts' matches as one set: every pair once, where it first appears
+        (parts in order, each part's rows in its order)."""
+        both = Correspondences(
+            np.concatenate([c.pairs for c in found]),
+            np.concatenate([c.distances for c in found]),
+            np.concatenate([c.ratios for c in found]),
+        )
+        _, first = np.unique(both.pairs, axis=0, return_index=True)
+        return both.rows(np.sort(first))

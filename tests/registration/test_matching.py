@@ -14,12 +14,16 @@ from sklearn.base import clone
 from o3d_rpointhop import (
     ConsensusGlobal,
     FGRGlobal,
+    FPFHTransformer,
     Matcher,
+    PooledMatcher,
     RANSACGlobal,
     SVDGlobal,
     find_correspondences,
+    register,
 )
 from o3d_rpointhop.registration.correspondences import (
+    Correspondences,
     correspondences_both_ways,
     turned_correspondences,
     unit_rows,
@@ -124,3 +128,65 @@ def test_no_step_probes_attributes_it_may_not_have():
     steps = Path(inspect.getfile(ConsensusGlobal)).parent
     for path in steps.glob("*.py"):
         assert not re.search(r"getattr\(self,", path.read_text()), path.name
+
+
+def _both(cap):
+    return Matcher(both_directions=True, max_matches=cap)
+
+
+@pytest.mark.parametrize(
+    "parts, message",
+    [
+        ([], "non-empty"),
+        ([("a", None)], "each part is"),
+        ([("a", None, _both(10)), ("a", None, _both(20))], "distinct"),
+        ([("a", object(), _both(10))], "no transform"),
+        ([("a", None, {"max_matches": 10})], "not a Matcher"),
+        ([("a", None, Matcher(n_nearest=2, mutual_filter=True))], "n_nearest"),
+    ],
+)
+def test_a_pooled_matcher_refuses_bad_parts(parts, message):
+    with pytest.raises(ValueError, match=message):
+        PooledMatcher(parts).validate()
+    with pytest.raises(ValueError, match=message):  # checked when the step runs, too
+        register(
+            np.random.default_rng(0).normal(size=(300, 3)),
+            np.random.default_rng(1).normal(size=(300, 3)),
+            FPFHTransformer(),
+            global_method=ConsensusGlobal(matcher=PooledMatcher(parts)),
+        )
+
+
+def test_pooling_keeps_each_pair_once_where_it_first_appears():
+    first = Correspondences(np.array([[0, 1], [2, 3]]), np.array([0.1, 0.2]), np.ones(2))
+    second = Correspondences(
+        np.array([[5, 6], [2, 3], [0, 0]]), np.array([1.0, 2.0, 3.0]), np.ones(3)
+    )
+    pooled = PooledMatcher.pool([first, second])
+    assert pooled.pairs.tolist() == [[0, 1], [2, 3], [5, 6], [0, 0]]
+    assert pooled.distances.tolist() == [0.1, 0.2, 1.0, 3.0]
+
+
+def test_a_pooled_step_matches_with_every_part_and_registers():
+    from helpers import assert_close_pose, moved_copy
+
+    from o3d_rpointhop.datasets import make_object
+
+    target = make_object(2500, shape_seed=3, sample_seed=1)
+    source, truth = moved_copy(target, seed=2)
+    fpfh = FPFHTransformer()
+    one = register(source, target, fpfh, global_method=ConsensusGlobal(matcher=_both(300)))
+    # the same descriptor twice, once under another name: the pool is the first part's
+    twice = PooledMatcher([("a", None, _both(300)), ("b", None, _both(300))])
+    same = register(source, target, fpfh, global_method=ConsensusGlobal(matcher=twice))
+    assert same.transformation.tobytes() == one.transformation.tobytes()
+    # FPFH at two widths: more matches than either part alone, and the right pose
+    other = FPFHTransformer(radius=0.3)
+    pooled = PooledMatcher([("narrow", None, _both(300)), ("wide", other, _both(300))])
+    step = ConsensusGlobal(matcher=pooled)
+    result = register(source, target, fpfh, global_method=step)
+    matches = result.steps[0].info["candidate_matches"]
+    assert 300 < matches <= 600
+    assert_close_pose(result.transformation, truth, 2.0, 0.02)
+    copy = clone(step)
+    assert copy.matcher is not pooled and copy.matcher.parts[1][1].radius == 0.3

@@ -12,7 +12,7 @@ from ..._utils.params import HasMethods, Interval
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
 from ..correspondences import Correspondences
-from ..matching import Matcher
+from ..matching import Matcher, PooledMatcher
 from ..result import StepResult
 from ._base import RegistrationStep
 from ._verification import verify
@@ -35,15 +35,17 @@ COUNT = [Interval(Integral, 3, None, closed="left"), Interval(Real, 0, 1, closed
 #: The constraint of a count of hypotheses verified by overlap.
 HYPOTHESES = [Interval(Integral, 1, None, closed="left")]
 
-#: The constraint of a step's matcher: ``None`` (the step's default) or a Matcher.
-MATCHER = [None, Matcher]
+#: The constraint of a step's matcher: ``None`` (the step's default), a Matcher, or a
+#: PooledMatcher (several descriptors' matches pooled).
+MATCHER = [None, Matcher, PooledMatcher]
 
 #: The docstring of ``matcher``, shared by the global steps.
 MATCHER_DOC = """matcher : Matcher, default=None
         Which descriptor pairs the step registers
         (:class:`~o3d_rpointhop.registration.Matcher`: metric, mutual and ratio
-        filters, both directions, k nearest, salient points, frame turns, cap).
-        ``None``: the step's :meth:`default_matcher`, {default}."""
+        filters, both directions, k nearest, salient points, frame turns, cap), or a
+        :class:`~o3d_rpointhop.registration.PooledMatcher` pooling the matches of
+        several descriptors. ``None``: the step's :meth:`default_matcher`, {default}."""
 
 #: The docstring of ``n_hypotheses``, shared by the steps that have it.
 N_HYPOTHESES_DOC = """n_hypotheses : {kind}, default={default}
@@ -102,26 +104,36 @@ class GlobalStep(RegistrationStep):
     def _matcher(self) -> Matcher:
         return self.default_matcher() if self.matcher is None else self.matcher
 
+    def _parts(self) -> list[tuple]:
+        """Each descriptor the step matches with (``None``: the pipeline's) and its
+        matcher: one, or a pooled matcher's parts."""
+        matcher = self._matcher()
+        if isinstance(matcher, PooledMatcher):
+            return matcher.descriptors(self.descriptor)
+        return [(self.descriptor, matcher)]
+
     def _descriptors(self) -> tuple:
-        return ((self.descriptor, self._matcher().frame_turns),)
+        return tuple((descriptor, matcher.frame_turns) for descriptor, matcher in self._parts())
 
     def _check_params(self) -> None:
         self._matcher().validate()
 
-    def _features(self, context: RegistrationContext) -> tuple[np.ndarray, np.ndarray]:
-        """Both clouds' descriptors as the matcher compares them: under every turn
-        (``(frame_turns, n, width)``) or plain, scaled to unit length for the cosine
-        metric (the context computes and scales them once per registration)."""
-        matcher = self._matcher()
-        return tuple(
-            context.features(self.descriptor, which, matcher.frame_turns, matcher.unit)
-            for which in ("source", "target")
-        )
-
     def _matches(self, context: RegistrationContext) -> Correspondences:
-        """The step's matches (source index, target index): its matcher on both clouds'
-        descriptors."""
-        return self._matcher()._match(*self._features(context), who=type(self).__name__)
+        """The step's matches (source index, target index): each matcher on both clouds'
+        descriptors as it compares them (under every turn, ``(frame_turns, n, width)``,
+        or plain; scaled to unit length for the cosine metric: the context computes and
+        scales them once per registration), pooled when there are several."""
+        found = [
+            matcher._match(
+                *(
+                    context.features(descriptor, which, matcher.frame_turns, matcher.unit)
+                    for which in ("source", "target")
+                ),
+                who=type(self).__name__,
+            )
+            for descriptor, matcher in self._parts()
+        ]
+        return found[0] if len(found) == 1 else PooledMatcher.pool(found)
 
     @staticmethod
     def _matched(context: RegistrationContext, corr: Correspondences):
