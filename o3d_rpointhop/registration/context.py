@@ -14,8 +14,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import open3d as o3d
 
+from .._utils.cells import CellGrid
 from .._utils.geometry import point_spacing, vectors
-from .._utils.threads import repeatable_open3d
 from .._utils.validation import as_viewpoints, renamed_seed
 from ..open3d_interop import to_point_cloud
 from ..transforms import from_centred
@@ -28,7 +28,6 @@ from .settings import RegistrationSettings, resolve_voxel_size
 
 __all__ = ["CloudKey", "RegistrationContext", "global_points"]
 
-reg = o3d.pipelines.registration
 
 #: The key of the context's own descriptor's features.
 _OWN = "own"
@@ -191,6 +190,7 @@ class RegistrationContext:
         self._coarse: RegistrationContext | None = None
         # Nearest target points of moved sources, by (which, transformation).
         self._nearest: dict[tuple[str, bytes], tuple[float, np.ndarray, np.ndarray]] = {}
+        self._grids: dict[tuple[str, float], CellGrid] = {}
 
     @property
     def voxel_size(self) -> float:
@@ -362,10 +362,9 @@ class RegistrationContext:
         source, target = self.clouds(which)
         if len(source.points) < _SHARED_FROM:
             # A small cloud's search costs less than reading distances from a wider one.
-            with repeatable_open3d():
-                result = reg.evaluate_registration(source, target, distance, transformation)
-            return StepResult.from_open3d("evaluation", result, 0.0, info, distance)
-        pairs, squared = self._inliers_within(transformation, distance, which)
+            pairs, squared = _inliers(source, target, self._grid(which, distance), transformation)
+        else:
+            pairs, squared = self._inliers_within(transformation, distance, which)
         inside = squared < distance * distance  # strictly, as Open3D's search
         count = int(inside.sum())
         n_source = len(source.points)
@@ -384,44 +383,55 @@ class RegistrationContext:
             distance=distance,
         )
 
+    def _grid(self, which: str, distance: float) -> CellGrid:
+        """The target cloud's cell grid at ``distance`` (``which`` cloud), built once."""
+        key = (which, float(distance))
+        if key not in self._grids:
+            target = np.asarray(self.clouds(which)[1].points)
+            self._grids[key] = CellGrid(target, distance)
+            while len(self._grids) > _NEAREST_KEPT:
+                del self._grids[next(iter(self._grids))]
+        return self._grids[key]
+
     def _inliers_within(
         self, transformation: np.ndarray, distance: float, which: str
     ) -> tuple[np.ndarray, np.ndarray]:
         """Every source point with a target point within ``distance`` after
         ``transformation``: ``(source, nearest target)`` pairs and their squared
-        distances. Each transformation is measured once by Open3D, at the widest
-        distance asked of it or the settings' ``spread_distance`` (the widest the flags
-        ask), and nearer distances are read from that: the points with a neighbour
-        within ``d`` have their nearest within the wider distance there too, at the
-        same distance (the moved points as Open3D moves them, the squared distances
-        summed as its search sums them), so each evaluation reports what Open3D's own
-        at ``d`` reports, to the bit, but for exact ties between two nearest points."""
-        source, target = self.clouds(which)
+        distances. Each transformation is searched once, at the widest distance asked
+        of it or the settings' ``spread_distance`` (the widest the flags ask), and
+        nearer distances are read from that: the points with a neighbour within ``d``
+        have their nearest within the wider distance there too, at the same distance,
+        so each evaluation reports what Open3D's own at ``d`` reports, to the bit, but
+        for exact ties between two nearest points."""
         key = (which, transformation.tobytes())
         kept = self._nearest.get(key)
         if kept is None or kept[0] < distance:
             wide = max(distance, self.settings.spread_distance)
-            kept = (wide, *_inliers(source, target, wide, transformation))
+            source, target = self.clouds(which)
+            kept = (wide, *_inliers(source, target, self._grid(which, wide), transformation))
             self._nearest[key] = kept
             while len(self._nearest) > _NEAREST_KEPT:
                 del self._nearest[next(iter(self._nearest))]
         return kept[1], kept[2]
 
 
-def _inliers(source, target, distance: float, transformation: np.ndarray):
-    """Open3D's inlier pairs of ``transformation`` within ``distance`` (one thread:
-    its sums in one order) and their squared distances, computed as Open3D computes
-    them: each moved coordinate summed in Open3D's order (numpy's matrix product rounds
-    differently), the squares summed x, y, z."""
-    with repeatable_open3d():
-        result = reg.evaluate_registration(source, target, distance, transformation)
-    pairs = np.asarray(result.correspondence_set, dtype=np.int64).reshape(-1, 2)
+def _inliers(source, target, grid: CellGrid, transformation: np.ndarray):
+    """Open3D's inlier pairs of ``transformation`` within the radius of ``grid`` (the
+    target's) and their squared distances, as Open3D's ``evaluate_registration``
+    computes them on one thread: each moved coordinate summed in Open3D's order
+    (numpy's matrix product rounds differently), the nearest target point strictly
+    within the radius (:class:`~o3d_rpointhop._utils.cells.CellGrid`, the same point
+    but for exact ties), the squares summed x, y, z, in source order."""
     rot, shift = transformation[:3, :3], transformation[:3, 3]
-    points = np.asarray(source.points)[pairs[:, 0]]
+    points = np.asarray(source.points)
     moved = (
         (points[:, :1] * rot[:, 0] + points[:, 1:2] * rot[:, 1]) + points[:, 2:] * rot[:, 2]
     ) + shift
-    diff = moved - np.asarray(target.points)[pairs[:, 1]]
+    _, index = grid.nearest(moved)
+    hit = np.flatnonzero(index < grid.n_points)
+    pairs = np.stack([hit, index[hit]], axis=1).astype(np.int64)
+    diff = moved[hit] - np.asarray(target.points)[index[hit]]
     squared = (diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1]) + diff[:, 2] * diff[:, 2]
     return pairs, squared
 
