@@ -26,7 +26,7 @@ import open3d as o3d
 
 from ..descriptors import DescriptorUnion, FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
-from ..registration import ConsensusGlobal, RANSACGlobal, register
+from ..registration import ConsensusGlobal, Matcher, PooledMatcher, RANSACGlobal, register
 from ..registration.defaults import SCENE_FPFH_WEIGHT
 from .peers import (
     fpfh_fgr,
@@ -46,6 +46,7 @@ __all__ = [
     "default_methods",
     "check_methods",
     "claimed_by",
+    "pooled_consensus",
     "scene_with_fpfh",
     "shipped_scene_model",
 ]
@@ -168,6 +169,25 @@ def _built_step(kind: str, own: tuple, matching: tuple) -> Any:
     step_class = {"ransac": RANSACGlobal, "consensus": ConsensusGlobal}[kind]
     matcher = step_class.default_matcher().set_params(**dict(matching)) if matching else None
     return step_class(matcher=matcher, **dict(own))
+
+
+def pooled_consensus(model: int, fpfh: int, fpfh_max_nn: int) -> Callable[[], Any]:
+    """A factory of fresh consensus steps (one per pair) on the model's matches (at most
+    ``model``) pooled with FPFH's (at most ``fpfh``, its histograms on at most
+    ``fpfh_max_nn`` neighbours), both nearest both ways. Picklable."""
+    return partial(_built_pooled, model, fpfh, fpfh_max_nn)
+
+
+def _built_pooled(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
+    parts = [
+        ("model", None, Matcher(both_directions=True, max_matches=model)),
+        (
+            "fpfh",
+            FPFHTransformer(max_nn=fpfh_max_nn),
+            Matcher(both_directions=True, max_matches=fpfh),
+        ),
+    ]
+    return ConsensusGlobal(matcher=PooledMatcher(parts))
 
 
 _SALIENT = {"salient_share": 0.75}
@@ -393,6 +413,30 @@ METHODS = _methods(
         _register_with(global_method=global_step("consensus", **_TURNS)),
         datasets=_SCENES,
         model="scene",
+    ),
+    Method(
+        "rpointhop-scene-own-matches",
+        "R-PointHop, shipped scene model, consensus on the model's own matches (at most "
+        "4000, the default before FPFH's were pooled) + point-to-plane ICP",
+        _register_with(global_method="consensus"),
+        datasets=_SCENES,
+        model="scene",
+    ),
+    *(
+        Method(
+            f"rpointhop-scene-pooled-{model}-{fpfh}-nn{nn}",
+            f"R-PointHop, shipped scene model, consensus on its matches (at most {model}) "
+            f"pooled with FPFH's (at most {fpfh}, {nn} neighbours) + point-to-plane ICP",
+            _register_with(global_method=pooled_consensus(model, fpfh, nn)),
+            datasets=_SCENES,
+            model="scene",
+        )
+        for model, fpfh, nn in (
+            (4000, 2000, 100),
+            (4000, 2000, 50),
+            (3000, 1000, 50),
+            (4000, 1000, 50),
+        )
     ),
     Method(
         "rpointhop-scene-fpfh",
