@@ -286,7 +286,7 @@ class PooledMatcher(BaseEstimator):
     of points found by several parts is kept once, as the first part found it. A true
     correspondence that one descriptor misses (R-PointHop's frames on a flat wall, an
     FPFH histogram that repeats) may be another's, so a consensus over the pool finds
-    more pairs that overlap little than either part alone (docs/registration.md,
+    more pairs that overlap little than either part alone (docs/low_overlap.md,
     "Pooled matches").
 
     Parameters
