@@ -12,7 +12,6 @@ import open3d as o3d
 from .._utils.compiled import kernel
 from .._utils.kdtree import insert_ranked
 from .._utils.params import Interval, validate_params
-from .._utils.threads import kernel_threads, map_threads
 from ..descriptors import unit_rows
 
 __all__ = [
@@ -222,44 +221,24 @@ class _ColumnCandidates:
         self.values = np.full((n_references, n), np.inf, dtype=queries.dtype)
         self.rows = np.zeros((n_references, n), dtype=np.int64)
         self.kept = np.zeros(n_references, dtype=np.int64)
-        self.n_threads = kernel_threads(None)
 
     def add(self, block, ref_sq, start: int, n_row: int) -> np.ndarray:
-        """Take a block's columns' candidates; return its rows' ``n_row`` candidates.
-        The block's rows and columns are shared out over the matching's threads
-        (:func:`_candidates_both_ways`; the same candidates on any count)."""
+        """Take a block's columns' candidates; return its rows' ``n_row`` candidates."""
         every_row = n_row >= block.shape[1]
         minus_two = np.full(1, -2.0, dtype=block.dtype)
-        rows = 0 if every_row else n_row
-        out = np.empty((len(block), max(rows, 1)), dtype=np.int64)
-        q, m = block.shape
-        parts = max(1, min(self.n_threads, q, m)) if block.size >= PARALLEL_FROM else 1
-        bounds = [
-            (q * t // parts, q * (t + 1) // parts, m * t // parts, m * (t + 1) // parts)
-            for t in range(parts)
-        ]
-
-        def part(r0: int, r1: int, c0: int, c1: int) -> None:
-            _candidates_both_ways(
-                block,
-                ref_sq,
-                self.query_sq[start : start + len(block)],
-                rows,
-                start,
-                0 if self.every else self.n,
-                self.values,
-                self.rows,
-                self.kept,
-                minus_two,
-                out,
-                r0,
-                r1,
-                c0,
-                c1,
-            )
-
-        map_threads(part, bounds, parts)
-        return _all_columns(block.shape, n_row) if every_row else out
+        row_cand = _candidates_both_ways(
+            block,
+            ref_sq,
+            self.query_sq[start : start + len(block)],
+            0 if every_row else n_row,
+            start,
+            0 if self.every else self.n,
+            self.values,
+            self.rows,
+            self.kept,
+            minus_two,
+        )
+        return _all_columns(block.shape, n_row) if every_row else row_cand
 
     def nearest(self, references: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Every reference's ``k`` nearest queries, exactly, from its candidates."""
@@ -278,10 +257,6 @@ class _ColumnCandidates:
             )
         return indices, distances
 
-
-#: Distance blocks from this many entries share the candidate pass out over every core
-#: (below, starting the threads costs more than it saves).
-PARALLEL_FROM = 1_000_000
 
 #: Distance blocks from this many entries take their candidates from the compiled
 #: kernel (the same columns as the argmin passes): below, the passes are as quick, and
@@ -309,8 +284,8 @@ def _smallest(values: np.ndarray, n: int) -> np.ndarray:
 def _smallest_rows(values, n):  # pragma: no cover - compiled
     """:func:`_smallest` in one pass per row: each row's ``n`` smallest kept in order as
     the row is read, a newcomer going after the ones it does not beat, which is the
-    order of the argmin passes (value, then index). One thread (the one-way search;
-    the both-ways pass, :func:`_candidates_both_ways`, shares its blocks out)."""
+    order of the argmin passes (value, then index). One thread: matching takes no
+    ``n_jobs``, so it starts no threads of its own."""
     q, m = values.shape
     out = np.empty((q, n), dtype=np.int64)
     for i in range(q):
@@ -323,55 +298,36 @@ def _smallest_rows(values, n):  # pragma: no cover - compiled
     return out
 
 
-@kernel(nogil=True)
+@kernel()
 def _candidates_both_ways(
-    block,
-    ref_sq,
-    query_sq,
-    n_row,
-    first,
-    n_col,
-    col_values,
-    col_rows,
-    col_kept,
-    minus_two,
-    out,
-    r0,
-    r1,
-    c0,
-    c1,
+    block, ref_sq, query_sq, n_row, first, n_col, col_values, col_rows, col_kept, minus_two
 ):  # pragma: no cover - compiled
-    """One pass over a block of products ``q . r`` (rows: queries ``first`` on): for the
-    rows ``r0:r1``, each row's ``n_row`` smallest of ``-2 q.r + |r|^2`` (into ``out``,
-    ``(rows, n_row)``; none when ``n_row`` is 0) and, for the columns ``c0:c1``, into the
-    running lists ``col_values`` / ``col_rows`` / ``col_kept``, each column's ``n_col``
-    smallest of ``-2 q.r + |q|^2`` over every row, in row order (none when 0). Calls on
-    disjoint row and column ranges can run on several threads at once: each list is
-    still filled in row order, so the candidates are those of one call over the whole
-    block. ``minus_two`` holds -2 in the block's dtype, so each value is computed in
-    that dtype as the numpy passes compute it. Both keep a newcomer after the ones it
-    does not beat: value, then index, as :func:`_smallest`."""
+    """One pass over a block of products ``q . r`` (rows: queries ``first`` on): each
+    row's ``n_row`` smallest of ``-2 q.r + |r|^2`` (returned, ``(rows, n_row)``; none
+    when ``n_row`` is 0) and, into the running lists ``col_values`` / ``col_rows`` /
+    ``col_kept``, each column's ``n_col`` smallest of ``-2 q.r + |q|^2`` (none when 0).
+    ``minus_two`` holds -2 in the block's dtype, so each value is computed in that dtype
+    as the numpy passes compute it. Both keep a newcomer after the ones it does not beat:
+    value, then index, as :func:`_smallest`."""
     q, m = block.shape
+    out = np.empty((q, max(n_row, 1)), dtype=np.int64)
     best = np.empty(max(n_row, 1), dtype=block.dtype)
     factor = minus_two[0]
     for i in range(q):
-        rows = n_row > 0 and r0 <= i < r1
-        if not rows and (n_col == 0 or c0 >= c1):
-            continue
-        lo, hi = (0, m) if rows else (c0, c1)
         kept = 0
         own = query_sq[i]
-        for j in range(lo, hi):
+        for j in range(m):
             g = block[i, j] * factor
-            if n_col and c0 <= j < c1:
+            if n_col:
                 w = g + own
                 c = col_kept[j]
                 if c < n_col or w < col_values[j, n_col - 1]:
                     col_kept[j] = insert_ranked(col_values[j], col_rows[j], c, w, first + i)
-            if rows:
+            if n_row:
                 v = g + ref_sq[j]
                 if kept < n_row or v < best[n_row - 1]:
                     kept = insert_ranked(best, out[i], kept, v, j)
+    return out
 
 
 def count_of(value: int | float, n: int, minimum: int = 1) -> int:

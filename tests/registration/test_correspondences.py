@@ -115,28 +115,6 @@ def test_both_ways_are_the_two_one_way_searches(dtype, n, m, k, k_back, chunk, m
     assert back_idx.shape == (m, min(k_back, n))
 
 
-@pytest.mark.parametrize("threads", [2, 3])
-def test_both_ways_shared_over_threads_gives_the_same_neighbours(threads, monkeypatch):
-    """The both-ways candidate pass shared out over threads (rows and columns in
-    pieces) finds each neighbour a single pass finds, ties included, over several
-    blocks of rows."""
-    from joblib import parallel_config
-
-    from o3d_rpointhop.registration import correspondences as module
-
-    monkeypatch.setattr(module, "_CHUNK_ELEMENTS", 20_000)
-    a, b = _tied_descriptors(np.float32, 210, 170, seed=4)
-    monkeypatch.setattr(module, "PARALLEL_FROM", 10**9)
-    with parallel_config(n_jobs=1):
-        one = module.nearest_both_ways(a, b, 2, 2)
-    monkeypatch.setattr(module, "PARALLEL_FROM", 1)
-    with parallel_config(n_jobs=threads):
-        many = module.nearest_both_ways(a, b, 2, 2)
-    for x, y in zip(one[0] + one[1], many[0] + many[1], strict=True):
-        assert x.tobytes() == y.tobytes()
-    np.testing.assert_array_equal(one[0][0], module.nearest_descriptors(a, b, 2)[0])
-
-
 def test_matches_both_ways_are_the_two_calls_matches():
     from o3d_rpointhop.registration.correspondences import (
         correspondences_both_ways,
