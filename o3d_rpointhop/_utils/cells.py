@@ -97,6 +97,7 @@ class CellGrid:
 
     def __init__(self, points: np.ndarray, radius: float) -> None:
         points = np.ascontiguousarray(points, dtype=np.float64)
+        self.points = points
         self.radius = float(radius)
         self.n_points = len(points)
         lo = points.min(axis=0) if len(points) else np.zeros(3)
@@ -149,6 +150,34 @@ class CellGrid:
         if self._tree is not None:
             raise ValueError("the points are searched with a k-d tree, not on cells")
         return self._order
+
+    def moved_pairs(
+        self, queries: np.ndarray, transformation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The queries moved by ``transformation`` (4, 4) that have a point closer than
+        the radius, as Open3D's ``evaluate_registration`` finds them on one thread.
+
+        Each moved coordinate is summed x, y, z, then the shift, as Open3D moves points
+        (numpy's matrix product rounds differently), and each squared distance x, y, z,
+        as the search sums it.
+
+        Returns
+        -------
+        pairs : ndarray of shape (k, 2), int64
+            ``(query row, nearest point's row)``, in query order.
+        squared : ndarray of shape (k,)
+            Their squared distances.
+        """
+        queries = np.asarray(queries, dtype=np.float64)
+        rot, shift = transformation[:3, :3], transformation[:3, 3]
+        moved = (
+            (queries[:, :1] * rot[:, 0] + queries[:, 1:2] * rot[:, 1]) + queries[:, 2:] * rot[:, 2]
+        ) + shift
+        _, index = self.nearest(moved)
+        hit = np.flatnonzero(index < self.n_points)
+        diff = moved[hit] - self.points[index[hit]]
+        squared = (diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1]) + diff[:, 2] * diff[:, 2]
+        return np.stack([hit, index[hit]], axis=1).astype(np.int64), squared
 
     def nearest(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance to and index of every query's nearest point closer than the radius.

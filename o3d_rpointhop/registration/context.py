@@ -362,7 +362,7 @@ class RegistrationContext:
         source, target = self.clouds(which)
         if len(source.points) < _SHARED_FROM:
             # A small cloud's search costs less than reading distances from a wider one.
-            pairs, squared = _inliers(source, target, self._grid(which, distance), transformation)
+            pairs, squared = self._grid(which, distance).moved_pairs(source.points, transformation)
         else:
             pairs, squared = self._inliers_within(transformation, distance, which)
         inside = squared < distance * distance  # strictly, as Open3D's search
@@ -408,32 +408,12 @@ class RegistrationContext:
         kept = self._nearest.get(key)
         if kept is None or kept[0] < distance:
             wide = max(distance, self.settings.spread_distance)
-            source, target = self.clouds(which)
-            kept = (wide, *_inliers(source, target, self._grid(which, wide), transformation))
+            points = self.clouds(which)[0].points
+            kept = (wide, *self._grid(which, wide).moved_pairs(points, transformation))
             self._nearest[key] = kept
             while len(self._nearest) > _NEAREST_KEPT:
                 del self._nearest[next(iter(self._nearest))]
         return kept[1], kept[2]
-
-
-def _inliers(source, target, grid: CellGrid, transformation: np.ndarray):
-    """Open3D's inlier pairs of ``transformation`` within the radius of ``grid`` (the
-    target's) and their squared distances, as Open3D's ``evaluate_registration``
-    computes them on one thread: each moved coordinate summed in Open3D's order
-    (numpy's matrix product rounds differently), the nearest target point strictly
-    within the radius (:class:`~o3d_rpointhop._utils.cells.CellGrid`, the same point
-    but for exact ties), the squares summed x, y, z, in source order."""
-    rot, shift = transformation[:3, :3], transformation[:3, 3]
-    points = np.asarray(source.points)
-    moved = (
-        (points[:, :1] * rot[:, 0] + points[:, 1:2] * rot[:, 1]) + points[:, 2:] * rot[:, 2]
-    ) + shift
-    _, index = grid.nearest(moved)
-    hit = np.flatnonzero(index < grid.n_points)
-    pairs = np.stack([hit, index[hit]], axis=1).astype(np.int64)
-    diff = moved[hit] - np.asarray(target.points)[index[hit]]
-    squared = (diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1]) + diff[:, 2] * diff[:, 2]
-    return pairs, squared
 
 
 def _as_open3d(scan: PreparedCloud, what: str) -> o3d.geometry.PointCloud:

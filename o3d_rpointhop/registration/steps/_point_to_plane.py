@@ -272,27 +272,6 @@ def _step(ata, atb):  # pragma: no cover - compiled
     return _update(x), True
 
 
-@kernel(nogil=True)
-def _pairs(
-    source, transformation, points, starts, lo, inv_cell, dims, sq_radius
-):  # pragma: no cover
-    """Each source row's nearest target row (sorted order) within the radius under
-    ``transformation`` (-1 for none) and the squared distance."""
-    n = source.shape[0]
-    found = np.full(n, -1, dtype=np.int64)
-    dist = np.zeros(n)
-    r = transformation
-    for i in range(n):
-        x, y, z = source[i, 0], source[i, 1], source[i, 2]
-        px = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + r[0, 3]
-        py = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + r[1, 3]
-        pz = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + r[2, 3]
-        best, j = nearest_one(px, py, pz, points, starts, lo, inv_cell, dims, sq_radius)
-        found[i] = j
-        dist[i] = best
-    return found, dist
-
-
 def point_to_plane_icp(
     source: np.ndarray,
     grid: CellGrid,
@@ -341,12 +320,10 @@ def point_to_plane_icp(
         rmse_now = np.sqrt(squared / count) if count else 0.0
         if abs(count / n - fitness) < relative_fitness and abs(rmse_now - rmse) < relative_rmse:
             break
-    found, dist = _pairs(source, current, *arguments)
-    inliers = found >= 0
-    pairs = np.stack([np.flatnonzero(inliers), grid.order[found[inliers]]], axis=1)
-    kept = int(inliers.sum())
-    rmse = float(np.sqrt(dist[inliers].sum() / kept)) if kept else 0.0
-    return PlaneICPResult(current, kept / n if n else 0.0, rmse, pairs.astype(np.int64))
+    pairs, squared = grid.moved_pairs(source, current)
+    kept = len(pairs)
+    rmse = float(np.sqrt(squared.sum() / kept)) if kept else 0.0
+    return PlaneICPResult(current, kept / n if n else 0.0, rmse, pairs)
 
 
 def _in_order(parts: np.ndarray) -> np.ndarray:

@@ -39,6 +39,18 @@ def _starts(truth, n, seed):
     return np.array(out)
 
 
+def _open3d_icp(source, target, distance, start, iterations):
+    """Open3D's point-to-plane ICP of ``source`` (an array) onto ``target`` from ``start``."""
+    return reg.registration_icp(
+        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source)),
+        target,
+        distance,
+        start,
+        reg.TransformationEstimationPointToPlane(),
+        reg.ICPConvergenceCriteria(max_iteration=iterations),
+    )
+
+
 @pytest.mark.parametrize("iterations", [1, 4, 15])
 def test_same_poses_as_open3d_point_to_plane(iterations):
     source, target = _pair()
@@ -46,14 +58,7 @@ def test_same_poses_as_open3d_point_to_plane(iterations):
     distance = 0.08
     expected = np.array(
         [
-            reg.registration_icp(
-                o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source)),
-                target,
-                distance,
-                start,
-                reg.TransformationEstimationPointToPlane(),
-                reg.ICPConvergenceCriteria(max_iteration=iterations),
-            ).transformation
+            _open3d_icp(source, target, distance, start, iterations).transformation
             for start in starts
         ]
     )
@@ -123,14 +128,7 @@ def test_one_pose_matches_open3d_result(iterations):
     assert len(source) > 2 * _point_to_plane.BLOCK
     start = _starts(np.eye(4), 1, seed=iterations)[0]
     distance = 0.06
-    expected = reg.registration_icp(
-        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source)),
-        target,
-        distance,
-        start,
-        reg.TransformationEstimationPointToPlane(),
-        reg.ICPConvergenceCriteria(max_iteration=iterations),
-    )
+    expected = _open3d_icp(source, target, distance, start, iterations)
     grid = CellGrid(np.asarray(target.points), distance)
     got = point_to_plane_icp(
         source, grid, np.asarray(target.normals), start, iterations, 1e-6, 1e-6
