@@ -18,11 +18,11 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
 import numpy as np
 import open3d as o3d
+from sklearn.base import BaseEstimator, clone
 
 from ..descriptors import DescriptorUnion, FPFHTransformer, RPointHopTransformer
 from ..open3d_interop import to_point_cloud
@@ -46,7 +46,7 @@ __all__ = [
     "default_methods",
     "check_methods",
     "claimed_by",
-    "pooled_consensus",
+    "pooled_step",
     "scene_with_fpfh",
     "shipped_scene_model",
 ]
@@ -146,8 +146,9 @@ def claimed_by(result) -> bool:
 
 
 def _resolved(options: dict) -> dict:
-    """``options`` with a callable ``global_method`` called: a fresh step per pair."""
-    chosen = dict(options)
+    """``options`` for one pair: an estimator (a global step) cloned, so that no pair
+    sees another's fitted state, and a callable ``global_method`` called."""
+    chosen = {k: clone(v) if isinstance(v, BaseEstimator) else v for k, v in options.items()}
     if callable(chosen.get("global_method")):
         chosen["global_method"] = chosen["global_method"]()
     return chosen
@@ -155,39 +156,33 @@ def _resolved(options: dict) -> dict:
 
 def global_step(
     kind: str, n_hypotheses: int = 1, step: dict | None = None, **matching
-) -> Callable[[], Any]:
-    """A factory of fresh global steps (one per pair) named by their public parameters:
-    ``kind`` (``"ransac"`` or ``"consensus"``), ``n_hypotheses``, the step's other
-    parameters ``step`` and the :class:`~o3d_rpointhop.registration.Matcher` parameters
-    ``matching`` (over the step's default matcher). Picklable, so runners can send it
-    to workers."""
-    own = tuple(sorted({**(step or {}), "n_hypotheses": n_hypotheses}.items()))
-    return partial(_built_step, kind, own, tuple(sorted(matching.items())))
-
-
-def _built_step(kind: str, own: tuple, matching: tuple) -> Any:
+) -> RANSACGlobal | ConsensusGlobal:
+    """A global step named by its public parameters: ``kind`` (``"ransac"`` or
+    ``"consensus"``), ``n_hypotheses``, the step's other parameters ``step`` and the
+    :class:`~o3d_rpointhop.registration.Matcher` parameters ``matching`` (over the
+    step's default matcher). The table holds the step itself; each pair registers with
+    a clone."""
     step_class = {"ransac": RANSACGlobal, "consensus": ConsensusGlobal}[kind]
-    matcher = step_class.default_matcher().set_params(**dict(matching)) if matching else None
-    return step_class(matcher=matcher, **dict(own))
+    matcher = step_class.default_matcher().set_params(**matching) if matching else None
+    return step_class(matcher=matcher, **{**(step or {}), "n_hypotheses": n_hypotheses})
 
 
-def pooled_consensus(model: int, fpfh: int, fpfh_max_nn: int) -> Callable[[], Any]:
-    """A factory of fresh consensus steps (one per pair) on the model's matches (at most
-    ``model``) pooled with FPFH's (at most ``fpfh``, its histograms on at most
-    ``fpfh_max_nn`` neighbours), both nearest both ways. Picklable."""
-    return partial(_built_pooled, model, fpfh, fpfh_max_nn)
-
-
-def _built_pooled(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
-    parts = [
-        ("model", None, Matcher(both_directions=True, max_matches=model)),
-        (
-            "fpfh",
-            FPFHTransformer(max_nn=fpfh_max_nn),
-            Matcher(both_directions=True, max_matches=fpfh),
-        ),
-    ]
-    return ConsensusGlobal(matcher=PooledMatcher(parts))
+def pooled_step(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
+    """The consensus on the model's matches (at most ``model``) pooled with FPFH's (at
+    most ``fpfh``, its histograms on at most ``fpfh_max_nn`` neighbours), both nearest
+    both ways."""
+    return ConsensusGlobal(
+        matcher=PooledMatcher(
+            [
+                ("model", None, Matcher(both_directions=True, max_matches=model)),
+                (
+                    "fpfh",
+                    FPFHTransformer(max_nn=fpfh_max_nn),
+                    Matcher(both_directions=True, max_matches=fpfh),
+                ),
+            ]
+        )
+    )
 
 
 _SALIENT = {"salient_share": 0.75}
@@ -195,8 +190,9 @@ _TURNS = {"frame_turns": 4}
 
 
 def _register_with(describe_with: Callable[[], Any] | None = None, **options):
-    """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a callable
-    ``global_method`` makes a fresh step per pair): it returns the whole result (the
+    """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a global step
+    given as an estimator is cloned for each pair, a callable ``global_method`` called
+    for each): it returns the whole result (the
     runner reads its transformation, its flags and, for the records, what its global
     step saw). ``describe_with``: a factory of the descriptor to use instead of the
     benchmark's (FPFH), one per pair."""
@@ -427,7 +423,7 @@ METHODS = _methods(
             f"rpointhop-scene-pooled-{model}-{fpfh}-nn{nn}",
             f"R-PointHop, shipped scene model, consensus on its matches (at most {model}) "
             f"pooled with FPFH's (at most {fpfh}, {nn} neighbours) + point-to-plane ICP",
-            _register_with(global_method=pooled_consensus(model, fpfh, nn)),
+            _register_with(global_method=pooled_step(model, fpfh, nn)),
             datasets=_SCENES,
             model="scene",
         )

@@ -13,6 +13,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from sklearn.base import BaseEstimator
+
 from .._utils.provenance import json_safe, library_facts
 from ..descriptors import FPFHTransformer, RPointHopTransformer, descriptor_identity
 from ._common import machine_facts
@@ -69,15 +71,21 @@ _FEATURES = {
 }
 
 
+def _option(value: Any) -> Any:
+    """How a record names a ``register()`` option: an estimator (a global step) by its
+    parameters on one line, as scikit-learn prints them, a function by its name."""
+    if isinstance(value, BaseEstimator):
+        return " ".join(repr(value).split())
+    return getattr(value, "__name__", value) if callable(value) else value
+
+
 def _method_entry(name: str, given: RPointHopTransformer, loso: dict, identity) -> dict:
     """One method's entry; ``identity`` is :func:`model_identity`, memoised per run."""
     method = METHODS[name]
     entry: dict = {"description": method.description}
     options = getattr(method.run, "options", None)
     if options is not None:
-        entry["options"] = json_safe(
-            {k: getattr(v, "__name__", v) if callable(v) else v for k, v in options.items()}
-        )
+        entry["options"] = json_safe({k: _option(v) for k, v in options.items()})
     if method.descriptor == "union":
         entry["descriptor"] = descriptor_identity(method.run.describe_with())
     elif method.model == "given":

@@ -112,3 +112,24 @@ def test_a_method_whose_peer_is_missing_is_skipped_with_its_install_line(monkeyp
     scene = registry.METHODS["rpointhop-scene"].preload(None)
     assert content_hash(scene) == content_hash(RPointHopTransformer.pretrained("scene"))
     assert registry.METHODS["icp"].preload("given") == "given"
+
+
+def test_a_methods_global_step_is_data_cloned_for_each_pair(monkeypatch):
+    """The table holds a method's global step as an estimator with its parameters; each
+    pair registers with a clone of it (the same parameters, never the table's object)."""
+    from o3d_rpointhop import ConsensusGlobal
+    from o3d_rpointhop.evaluation import methods as registry
+
+    table_step = registry.METHODS["rpointhop-scene-matches-2000"].run.options["global_method"]
+    assert isinstance(table_step, ConsensusGlobal)
+    assert table_step.n_hypotheses == 1 and table_step.matcher.max_matches == 2000
+    used = []
+    monkeypatch.setattr(registry, "register", lambda *a, **kw: used.append(kw["global_method"]))
+    run = registry.METHODS["rpointhop-scene-matches-2000"].run
+    cloud = np.zeros((10, 3))
+    run(cloud, cloud, None, 0.05, 0, None)
+    run(cloud, cloud, None, 0.05, 0, None)
+    assert used[0] is not table_step and used[1] is not used[0]
+    assert used[0].n_hypotheses == used[1].n_hypotheses == 1
+    assert used[0].matcher is not table_step.matcher
+    assert used[0].matcher.get_params() == table_step.matcher.get_params()

@@ -57,6 +57,13 @@ def test_every_method_names_its_descriptor(fitted):
     assert methods["fpfh-pipeline-consensus-icp"]["descriptor"]["class"].endswith("FPFHTransformer")
     assert methods["fpfh-ransac-icp"]["descriptor"]["class"].startswith("open3d.")
     assert methods["rpointhop-svd"]["options"] == {"global_method": "svd", "refine": None}
+    # A global step is named by its parameters, as scikit-learn prints them.
+    assert methods["rpointhop-scene-matches-2000"]["options"] == {
+        "global_method": "ConsensusGlobal(matcher=Matcher(both_directions=True, "
+        "max_matches=2000), n_hypotheses=1)"
+    }
+    pooled = methods["rpointhop-scene-pooled-4000-1000-nn50"]["options"]["global_method"]
+    assert "PooledMatcher" in pooled and "FPFHTransformer(max_nn=50)" in pooled
     # A union names both parts and the weight, not the benchmark's model alone.
     union = methods["rpointhop-scene-fpfh-turns"]["descriptor"]
     assert union["class"] == "o3d_rpointhop.DescriptorUnion"
