@@ -14,7 +14,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import open3d as o3d
 
-from .._utils.cells import CellGrid
 from .._utils.geometry import point_spacing, vectors
 from .._utils.validation import as_viewpoints, renamed_seed
 from ..open3d_interop import to_point_cloud
@@ -22,6 +21,7 @@ from ..transforms import from_centred
 from .checks import check_geometry
 from .correspondences import unit_rows
 from .defaults import DEFAULT_GLOBAL_POINTS, default_descriptor, resolve_global_points
+from .fitness import FitnessEvaluator
 from .prepared import PreparedCloud, describe_global, estimate_normals, prepare_cloud
 from .result import StepResult
 from .settings import RegistrationSettings, resolve_voxel_size
@@ -43,15 +43,6 @@ class CloudKey(NamedTuple):
     which: str
     level: str
     scale: float
-
-
-#: Transformations whose nearest target points a context keeps for its evaluations
-#: (the last ones measured: a registration measures a few, multiway one per edge).
-_NEAREST_KEPT = 8
-#: Source clouds from this many points share one search between a transformation's
-#: evaluations; smaller ones are searched at each distance (on a 1000-point object
-#: pair sharing cost 1-4 % more time per registration, on a scene pair it saves 20 ms).
-_SHARED_FROM = 5000
 
 
 class RegistrationContext:
@@ -121,6 +112,9 @@ class RegistrationContext:
         The source's and the target's unit up vectors, or None.
     random_state : int
         The seed of every random choice.
+    fitness : FitnessEvaluator
+        Measures transformations of this pair (:meth:`evaluate`), its searches kept
+        for the next measurement of the same transformation.
     """
 
     def __init__(
@@ -188,9 +182,7 @@ class RegistrationContext:
         self._normals: dict[CloudKey, o3d.geometry.PointCloud] = {}
         self._downsampled: dict[CloudKey, o3d.geometry.PointCloud] = {}
         self._coarse: RegistrationContext | None = None
-        # Nearest target points of moved sources, by (which, transformation).
-        self._nearest: dict[tuple[str, bytes], tuple[float, np.ndarray, np.ndarray]] = {}
-        self._grids: dict[tuple[str, float], CellGrid] = {}
+        self.fitness = FitnessEvaluator(self.clouds, self.settings.spread_distance)
 
     @property
     def voxel_size(self) -> float:
@@ -353,67 +345,9 @@ class RegistrationContext:
         """Fitness, inlier RMSE and inlier pairs of ``transformation`` (centred frame)
         within ``max_correspondence_distance``, on the full-resolution clouds
         (``which="full"``) or the global step's (``"global"``): Open3D's
-        ``evaluate_registration``, with one search per transformation however many
-        distances it is measured at (:meth:`_inliers_within`; sources under
-        :data:`_SHARED_FROM` points are searched at each distance)."""
-        distance = float(max_correspondence_distance)
-        transformation = np.array(transformation, dtype=np.float64)
-        info = {"max_correspondence_distance": distance}
-        source, target = self.clouds(which)
-        if len(source.points) < _SHARED_FROM:
-            # A small cloud's search costs less than reading distances from a wider one.
-            pairs, squared = self._grid(which, distance).moved_pairs(source.points, transformation)
-        else:
-            pairs, squared = self._inliers_within(transformation, distance, which)
-        inside = squared < distance * distance  # strictly, as Open3D's search
-        count = int(inside.sum())
-        n_source = len(source.points)
-        # Open3D's numbers: the share of source points, and the RMS of the squared
-        # distances summed in source order.
-        rmse = float(np.sqrt(np.cumsum(squared[inside])[-1] / count)) if count else 0.0
-        return StepResult(
-            name="evaluation",
-            # Column-major, as Open3D's own result hands it over: products with it round
-            # as they did.
-            transformation=np.asfortranarray(transformation),
-            fitness=count / n_source if count else 0.0,
-            inlier_rmse=rmse,
-            correspondence_set=pairs[inside],
-            info=info,
-            distance=distance,
-        )
-
-    def _grid(self, which: str, distance: float) -> CellGrid:
-        """The target cloud's cell grid at ``distance`` (``which`` cloud), built once."""
-        key = (which, float(distance))
-        if key not in self._grids:
-            target = np.asarray(self.clouds(which)[1].points)
-            self._grids[key] = CellGrid(target, distance)
-            while len(self._grids) > _NEAREST_KEPT:
-                del self._grids[next(iter(self._grids))]
-        return self._grids[key]
-
-    def _inliers_within(
-        self, transformation: np.ndarray, distance: float, which: str
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Every source point with a target point within ``distance`` after
-        ``transformation``: ``(source, nearest target)`` pairs and their squared
-        distances. Each transformation is searched once, at the widest distance asked
-        of it or the settings' ``spread_distance`` (the widest the flags ask), and
-        nearer distances are read from that: the points with a neighbour within ``d``
-        have their nearest within the wider distance there too, at the same distance,
-        so each evaluation reports what Open3D's own at ``d`` reports, to the bit, but
-        for exact ties between two nearest points."""
-        key = (which, transformation.tobytes())
-        kept = self._nearest.get(key)
-        if kept is None or kept[0] < distance:
-            wide = max(distance, self.settings.spread_distance)
-            points = self.clouds(which)[0].points
-            kept = (wide, *self._grid(which, wide).moved_pairs(points, transformation))
-            self._nearest[key] = kept
-            while len(self._nearest) > _NEAREST_KEPT:
-                del self._nearest[next(iter(self._nearest))]
-        return kept[1], kept[2]
+        ``evaluate_registration``, measured by the context's
+        :class:`~o3d_rpointhop.registration.fitness.FitnessEvaluator`."""
+        return self.fitness.evaluate(transformation, max_correspondence_distance, which)
 
 
 def _as_open3d(scan: PreparedCloud, what: str) -> o3d.geometry.PointCloud:

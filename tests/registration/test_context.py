@@ -261,7 +261,7 @@ def test_evaluations_are_open3ds_to_the_bit_whatever_the_order():
         np.testing.assert_array_equal(got.correspondence_set, np.asarray(want.correspondence_set))
         seen_partial += 0.0 < got.fitness < 1.0
     assert seen_partial >= 5  # the distances cut through the clouds, not around them
-    assert len(context._nearest) <= 8 and len(context._grids) <= 8
+    assert len(context.fitness._nearest) <= 8 and len(context.fitness._grids) <= 8
 
 
 def test_clouds_with_normals_are_cached_by_typed_keys_and_shared():
