@@ -20,6 +20,7 @@ import numbers
 from dataclasses import dataclass
 
 import numpy as np
+import open3d as o3d
 
 from .._utils.geometry import point_spacing
 from .._utils.validation import is_positive_number
@@ -236,20 +237,34 @@ def resolve_voxel_size(source, target, voxel_size: float | str, n_global_points:
         # Descriptors compare neighbourhoods of k points: clouds of different density
         # (near-duplicate points, uneven sampling) are evened out at the resolution.
         return spacing, min(spacings) < _DENSITY_RATIO * spacing
-    # Surfaces: the point count falls with the square of the voxel size.
+    return _voxel_keeping((source, target), spacing, n_global_points), True
+
+
+def _voxel_keeping(clouds, spacing: float, n_global_points: int) -> float:
+    """The voxel at which the largest of ``clouds`` (Open3D clouds of ``spacing``) keeps
+    about ``n_global_points`` points, at most 15 % more: surfaces lose points with the
+    square of the voxel size, and the guess is corrected by downsampling."""
+    largest = max(len(c.points) for c in clouds)
     voxel = spacing * np.sqrt(largest / n_global_points)
     for _ in range(10):
-        kept = max(len(c.voxel_down_sample(voxel).points) for c in (source, target))
+        kept = max(len(c.voxel_down_sample(voxel).points) for c in clouds)
         if kept <= 1.15 * n_global_points:
             break
         voxel *= np.sqrt(kept / n_global_points)
-    return float(voxel), True
+    return float(voxel)
 
 
 def common_voxel(clouds: list[np.ndarray], n_global_points: int) -> float:
-    """One resolution for every scan: the largest that any scan needs, its own spacing
-    widened until it keeps about ``n_global_points`` points (surfaces: count ~ 1 /
-    voxel^2), so that no scan is finer than it can be described."""
-    return float(
-        max(point_spacing(c) * max(1.0, np.sqrt(len(c) / n_global_points)) for c in clouds)
-    )
+    """One resolution for every scan: the largest that any scan needs, so that no scan
+    is finer than it can be described. A scan of at most ``n_global_points`` points
+    needs its point spacing; a larger one the voxel at which it keeps about
+    ``n_global_points`` (as :func:`resolve_voxel_size` chooses for a pair)."""
+    needs = []
+    for points in clouds:
+        spacing = point_spacing(points)
+        if len(points) <= n_global_points:
+            needs.append(spacing)
+        else:
+            cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+            needs.append(_voxel_keeping([cloud], spacing, n_global_points))
+    return float(max(needs))
