@@ -53,7 +53,7 @@ from .result import MultiwayResult
 from .settings import RegistrationSettings, common_voxel
 from .steps import PointToPlaneICP
 
-__all__ = ["register_multiway"]
+__all__ = ["register_multiway", "scan_set_points"]
 
 log = logging.getLogger(__name__)
 
@@ -77,10 +77,24 @@ ALL_PAIRS_UP_TO = 12
 SCAN_POINTS_FACTOR = 1.5
 
 
-def _scan_points(n_global_points: int | str, descriptor: Any) -> int:
-    """The points the common resolution keeps of the scan that needs the coarsest:
-    ``n_global_points``, or for ``"auto"`` :data:`SCAN_POINTS_FACTOR` times what
-    ``register()`` would keep of a pair with ``descriptor``."""
+def scan_set_points(n_global_points: int | str, descriptor: Any) -> int:
+    """The points :func:`register_multiway`'s common resolution keeps of the scan that
+    needs the coarsest (``voxel_size="auto"``).
+
+    Parameters
+    ----------
+    n_global_points : int or "auto"
+        An int is used as given. ``"auto"``: :data:`SCAN_POINTS_FACTOR` times what
+        ``register()`` keeps of a pair described by ``descriptor``
+        (:func:`~o3d_rpointhop.registration.defaults.resolve_global_points`).
+    descriptor : transformer or None
+
+    Returns
+    -------
+    int
+        With :func:`~o3d_rpointhop.registration.settings.common_voxel`, the resolution:
+        ``common_voxel(scans, scan_set_points("auto", descriptor))``.
+    """
     if n_global_points == "auto":
         return round(SCAN_POINTS_FACTOR * resolve_global_points("auto", descriptor))
     return int(n_global_points)
@@ -443,7 +457,7 @@ def register_multiway(
     # The screening step, resolved and checked as register() does (copied per pair).
     global_method = build_chain(global_method, None, worker)[0][1]
     if voxel_size == "auto":
-        voxel = common_voxel(points, _scan_points(n_global_points, worker))
+        voxel = common_voxel(points, scan_set_points(n_global_points, worker))
     else:
         voxel = float(voxel_size)
     settings = (settings or RegistrationSettings()).at(voxel)
@@ -464,7 +478,7 @@ def register_multiway(
         if voxel_size != "auto":
             raise
         # Say which scan made the common resolution as coarse as it is.
-        n_points = _scan_points(n_global_points, worker)
+        n_points = scan_set_points(n_global_points, worker)
         setter = int(np.argmax([common_voxel([p], n_points) for p in points]))
         raise ValueError(
             f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan "
