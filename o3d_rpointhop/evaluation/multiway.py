@@ -19,8 +19,8 @@ import numpy as np
 import open3d as o3d
 
 from ..descriptors import FPFHTransformer
-from ..registration.defaults import default_descriptor
-from ..registration.multiway import register_multiway, scan_set_points
+from ..registration.defaults import DEFAULT_GLOBAL_POINTS
+from ..registration.multiway import register_multiway
 from ..registration.pose_graph import optimise_pose_graph
 from ..registration.result import MultiwayResult
 from ..registration.settings import common_voxel
@@ -151,8 +151,7 @@ def run_multiway(objects=OBJECTS, descriptors=tuple(DESCRIPTORS), *, data=None, 
         entry = {"scans": names, "points": [len(m) for m in moved], "methods": {}}
         for method in descriptors:
             if method == "open3d-recipe":
-                # register_multiway's resolution with its default descriptor
-                voxel = common_voxel(moved, scan_set_points("auto", default_descriptor()))
+                voxel = common_voxel(moved, DEFAULT_GLOBAL_POINTS)  # register_multiway's
                 result = open3d_multiway_recipe(moved, voxel, seed)
             else:
                 descriptor = FPFHTransformer() if method == "fpfh" else None

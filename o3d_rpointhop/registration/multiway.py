@@ -53,7 +53,7 @@ from .result import MultiwayResult
 from .settings import RegistrationSettings, common_voxel
 from .steps import PointToPlaneICP
 
-__all__ = ["register_multiway", "scan_set_points"]
+__all__ = ["register_multiway"]
 
 log = logging.getLogger(__name__)
 
@@ -69,35 +69,6 @@ MAX_FREE_SPACE_VIOLATION = 0.1
 RETRIEVED_NEIGHBOURS = 6
 #: Up to this many scans, every pair is a candidate.
 ALL_PAIRS_UP_TO = 12
-#: ``n_global_points="auto"``: the common resolution keeps this multiple of the points a
-#: pair's global step keeps. Chosen on the four training rooms (``benchmark rooms``, the
-#: defaults): 1, 1.5 and 2 registered 308, 312 and 308 of 357 gt pairs in 154, 134 and
-#: 186 s, where the resolution stopped at its first guess (2-3x the points) registered
-#: 312 in 304 s.
-SCAN_POINTS_FACTOR = 1.5
-
-
-def scan_set_points(n_global_points: int | str, descriptor: Any) -> int:
-    """The points :func:`register_multiway`'s common resolution keeps of the scan that
-    needs the coarsest (``voxel_size="auto"``).
-
-    Parameters
-    ----------
-    n_global_points : int or "auto"
-        An int is used as given. ``"auto"``: :data:`SCAN_POINTS_FACTOR` times what
-        ``register()`` keeps of a pair described by ``descriptor``
-        (:func:`~o3d_rpointhop.registration.defaults.resolve_global_points`).
-    descriptor : transformer or None
-
-    Returns
-    -------
-    int
-        With :func:`~o3d_rpointhop.registration.settings.common_voxel`, the resolution:
-        ``common_voxel(scans, scan_set_points("auto", descriptor))``.
-    """
-    if n_global_points == "auto":
-        return round(SCAN_POINTS_FACTOR * resolve_global_points("auto", descriptor))
-    return int(n_global_points)
 
 
 def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any = "ransac"):
@@ -384,9 +355,8 @@ def register_multiway(
         needs to keep about ``n_global_points`` points.
     n_global_points : int or "auto", default="auto"
         With ``voxel_size="auto"``, the common resolution keeps about this many points
-        (at most 15 % more) of the scan that needs the coarsest, every other scan fewer;
-        ``"auto"``: 1.5 times what ``register()`` keeps of a pair, the descriptor's
-        ``registration_points_`` (the scene model: 4096, so 6144), else 2048 (3072).
+        of the largest scan; ``"auto"``: the descriptor's ``registration_points_`` (the
+        scene model: 4096), else 2048.
     min_fitness : float, default=0.3
         A pair becomes an edge when its screening leaves at least this share of the
         source scan (at the common resolution) within the settings' ``edge_distance``
@@ -457,7 +427,7 @@ def register_multiway(
     # The screening step, resolved and checked as register() does (copied per pair).
     global_method = build_chain(global_method, None, worker)[0][1]
     if voxel_size == "auto":
-        voxel = common_voxel(points, scan_set_points(n_global_points, worker))
+        voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
     else:
         voxel = float(voxel_size)
     settings = (settings or RegistrationSettings()).at(voxel)
@@ -478,7 +448,7 @@ def register_multiway(
         if voxel_size != "auto":
             raise
         # Say which scan made the common resolution as coarse as it is.
-        n_points = scan_set_points(n_global_points, worker)
+        n_points = resolve_global_points(n_global_points, worker)
         setter = int(np.argmax([common_voxel([p], n_points) for p in points]))
         raise ValueError(
             f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan "

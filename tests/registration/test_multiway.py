@@ -188,8 +188,7 @@ def test_merging_meshing_and_the_summary_are_library_methods():
 
 def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(monkeypatch):
     """A descriptor that states the consensus and a cloud size (as the scene model does)
-    has its scan sets screened by the consensus at 1.5 times that size (register()'s
-    step and size, widened for scan sets: multiway.SCAN_POINTS_FACTOR)."""
+    has its scan sets screened by the consensus at that size, as register() would."""
     from o3d_rpointhop import FPFHTransformer
     from o3d_rpointhop.registration import multiway
     from o3d_rpointhop.registration.steps import ConsensusGlobal, RANSACGlobal
@@ -208,7 +207,7 @@ def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(
     scans, truth = partial_views(3, seed=4)
     stated = FPFHTransformer()
     stated.registration_global_method_ = "consensus"
-    stated.registration_points_ = 1000
+    stated.registration_points_ = 1500
     result = register_multiway(scans, stated, random_state=0)
     # Three pairs, each screened by the consensus (one the other way too, should its
     # first way fall below the edge fitness).

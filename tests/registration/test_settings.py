@@ -49,28 +49,3 @@ def test_settings_are_checked():
         register(make_object(300), make_object(300), settings={"ransac_factor": 2.0})
     bound = RegistrationSettings(normal_radius_factor=3.0).at(0.5)
     assert bound.normal_radius == 1.5 and bound.feature_radius == 2.5
-
-
-def test_the_common_voxel_keeps_every_scan_near_the_global_size():
-    """The scans' common resolution is the one their largest needs: it keeps about
-    n_global_points (at most 15 % more), every other scan fewer, as register() sizes a
-    pair; a scan under the size needs only its spacing."""
-    import open3d as o3d
-
-    from o3d_rpointhop._utils.geometry import point_spacing
-    from o3d_rpointhop.registration.settings import common_voxel, resolve_voxel_size
-
-    def cloud(points):
-        return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-
-    scans = [make_object(n, shape_seed=2, sample_seed=n) * s for n, s in ((9000, 1.0), (5000, 1.4))]
-    voxel = common_voxel(scans, 1000)
-    kept = [len(cloud(p).voxel_down_sample(voxel).points) for p in scans]
-    assert 500 <= max(kept) <= 1.15 * 1000
-    # One scan alone needs the voxel register() gives a pair of it with itself.
-    for p in scans:
-        alone, _ = resolve_voxel_size(cloud(p), cloud(p), "auto", 1000)
-        assert common_voxel([p], 1000) == pytest.approx(alone)
-    assert voxel == max(common_voxel([p], 1000) for p in scans)
-    small = make_object(500, shape_seed=2, sample_seed=1)
-    assert common_voxel([small], 1000) == point_spacing(small)
