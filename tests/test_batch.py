@@ -22,6 +22,7 @@ def clouds():
     return [make_object(400 + 50 * s, shape_seed=s) for s in range(4)]
 
 
+@pytest.mark.slow
 def test_transform_many_equals_one_by_one_in_order(model, clouds):
     expected = [model.transform(c) for c in clouds]
     legacy = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(clouds[1]))

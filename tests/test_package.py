@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 
 def test_import_works_under_python_OO():
     import subprocess
@@ -15,6 +17,7 @@ def test_import_works_under_python_OO():
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
 
 
+@pytest.mark.slow
 def test_the_package_top_loads_lazily_and_exports_everything():
     """``import o3d_rpointhop`` loads neither Open3D nor scikit-learn; every name in
     ``__all__`` resolves, and the CLI's copy of the shipped model names is right."""

@@ -64,6 +64,7 @@ def test_reconstruct_command(tmp_path, capsys):
     assert re.search(r"left out: \S*other\.npy: no pair fit: the best, with \S+, has edge", err)
 
 
+@pytest.mark.slow
 def test_reconstruct_reads_folders_and_patterns_and_keeps_line_k_for_scan_k(tmp_path, capsys):
     """A folder of scans (with a note beside them) and a quoted pattern give the same
     scans by name; with a scan of something else among them, the KITTI trajectory keeps
@@ -474,6 +475,7 @@ def test_folders_and_patterns_list_scans_in_natural_order(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_reconstruct_sequential_reaches_register_multiway(tmp_path, monkeypatch):
     """--sequential says the scans come in acquisition order; without it the order of
     the files does not matter (register_multiway's default)."""

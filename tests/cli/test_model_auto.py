@@ -57,6 +57,7 @@ def test_register_chooses_the_object_model_for_objects(tmp_path, capsys):
     assert summary["provenance"]["config"]["register"]["global_method"] == "ransac"
 
 
+@pytest.mark.slow
 def test_config_from_a_record_repeats_the_choice(rooms, tmp_path, capsys):
     result = tmp_path / "r.json"
     assert main(["register", *rooms, "--transform", str(result)]) in (0, 3)

@@ -54,6 +54,7 @@ def test_grid_clouds_are_invariant_anywhere(models, model, seed, shift, survey):
     assert relative_difference(base, moved) < CONTRACT
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", MODELS)
 def test_large_grid_clouds_are_invariant_at_survey_coordinates(models, model):
     """20,000 points (Poisson-disk samples) of a 20 m object on a millimetre grid,

@@ -33,6 +33,7 @@ def test_orders_are_five_and_each_a_permutation(rooms_order):
     assert found["reversed"] == list(range(12))[::-1]
 
 
+@pytest.mark.slow
 def test_a_synthetic_scene_scores_the_same_in_every_order(rooms_order, tmp_path):
     """Three views of one object laid out as a 3DMatch scene (fragments numbered 0, 4,
     10, gt.log and gt.info for two pairs): every order places all three, counts both

@@ -26,6 +26,7 @@ def scene_folder(tmp_path):
     return tmp_path
 
 
+@pytest.mark.slow
 def test_leave_one_scene_out_never_sees_its_scene(scene_folder):
     assert scene_names(scene_folder) == ["scene-a", "scene-b", "scene-c"]
     seen = []

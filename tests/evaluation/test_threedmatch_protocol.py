@@ -72,6 +72,7 @@ def test_the_official_pairs_leave_consecutive_fragments_out(folder):
     assert all(p.information[0, 0] == 4.0 and p.overlap == 0.6 for p in kept)
 
 
+@pytest.mark.slow
 def test_a_run_keeps_every_estimate_and_reports_the_official_summary(folder):
     results = run_3dmatch(["icp", "fpfh-pipeline-consensus-icp"], data=folder, progress=False)
     assert results["settings"]["protocol"].startswith("official")

@@ -53,6 +53,7 @@ def _room_scans():
     return [make_room(20000, random_state=k) - s for k, s in enumerate(sensors)]
 
 
+@pytest.mark.slow
 def test_multiway_records_the_violations_of_fitting_pairs(tmp_path):
     scans = _room_scans()
     with_sensors = register_multiway(scans, "scene", viewpoints="origin", max_violation=None)
@@ -65,6 +66,7 @@ def test_multiway_records_the_violations_of_fitting_pairs(tmp_path):
     assert blind.free_space == {}  # no sensors, nothing to measure
 
 
+@pytest.mark.slow
 def test_multiway_keeps_only_edges_within_the_limit():
     scans = _room_scans()
     free = register_multiway(scans, "scene", viewpoints="origin", max_violation=None)
@@ -76,6 +78,7 @@ def test_multiway_keeps_only_edges_within_the_limit():
         register_multiway(scans, "scene", viewpoints="origin", max_violation=1.5)
 
 
+@pytest.mark.slow
 def test_the_consensus_verifies_more_hypotheses_when_the_sensors_are_known():
     from o3d_rpointhop import register
     from o3d_rpointhop.registration.steps.consensus import SENSOR_HYPOTHESES

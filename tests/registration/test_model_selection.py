@@ -54,6 +54,7 @@ def test_descriptor_parameters_are_reachable_through_the_pipeline():
     }
 
 
+@pytest.mark.slow
 def test_grid_search_over_descriptor_and_step_parameters():
     X, y = object_pairs(4)
     search = GridSearchCV(

@@ -27,6 +27,7 @@ def test_poses_of_a_synthetic_multiscan_object_are_recovered():
     assert set(result.pairs) == {(i, j) for i in range(4) for j in range(i + 1, 4)}
 
 
+@pytest.mark.slow
 def test_a_scan_set_at_survey_coordinates_gives_what_it_gives_at_the_origin():
     """The same scans moved 6000 km from the origin: the same edges, and the same poses
     once moved back, within rounding; its pose graph is in the scans' own coordinates."""
@@ -46,6 +47,7 @@ def test_a_scan_set_at_survey_coordinates_gives_what_it_gives_at_the_origin():
         np.testing.assert_allclose(np.asarray(node.pose), pose, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_scans_in_a_mix_of_frames_give_what_they_give_in_one():
     """One scan at UTM coordinates and the others near the origin (or scan 0 far and
     the rest near): each scan is centred on its own centroid for the whole run, so the
@@ -127,6 +129,7 @@ def test_pairs_on_a_dask_cluster_give_the_same_poses():
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_a_scan_of_something_else_is_reported_unconnected():
     scans, truth = partial_views(3, seed=1)
     stranger = make_object(1700, shape_seed=77) * 0.8 + 0.3  # another object entirely
@@ -161,6 +164,7 @@ def test_bad_input(clouds, message):
         register_multiway(clouds)
 
 
+@pytest.mark.slow
 def test_merging_meshing_and_the_summary_are_library_methods():
     from scipy.spatial import cKDTree
 
@@ -186,6 +190,7 @@ def test_merging_meshing_and_the_summary_are_library_methods():
         result.merge(scans[:2])
 
 
+@pytest.mark.slow
 def test_scans_are_screened_with_the_global_step_and_size_the_descriptor_states(monkeypatch):
     """A descriptor that states the consensus and a cloud size (as the scene model does)
     has its scan sets screened by the consensus at that size, as register() would."""
@@ -315,6 +320,7 @@ def test_a_scan_set_registered_from_retrieved_pairs_is_placed(monkeypatch):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("retrieved", [False, True])
 def test_the_same_scans_in_any_order_give_the_same_room(retrieved, monkeypatch):
     """Shuffled and reversed, the same scans give the same placed set, edges and
@@ -343,6 +349,7 @@ def test_the_same_scans_in_any_order_give_the_same_room(retrieved, monkeypatch):
                 np.testing.assert_allclose(mine, theirs, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_room_is_rooted_in_its_largest_part_not_in_scan_0():
     """Scan 0 overlaps nothing: the other scans are still placed, in the frame of the
     first of them, and the result says which parts the scans fell into (before, every
@@ -359,6 +366,7 @@ def test_a_room_is_rooted_in_its_largest_part_not_in_scan_0():
     assert summary["frame"] == "a" and summary["parts"] == [["a", "b", "c", "d"], ["s"]]
 
 
+@pytest.mark.slow
 def test_a_smaller_part_is_returned_as_its_own_reconstruction(tmp_path):
     """Two views of another object, far away, form a part of their own: they are not
     placed in the room, but reconstructed on their own, in the frame of the first of
@@ -406,6 +414,7 @@ def test_a_pair_that_fails_one_way_is_screened_the_other_way(monkeypatch):
         assert rotation_error_deg(result.poses[k], truth[k]) < 2.0
 
 
+@pytest.mark.slow
 def test_scans_handed_to_workers_as_read_only_memory_maps():
     """joblib passes large arrays to its worker processes as read-only memory maps,
     which Open3D refuses to wrap: the pairs still register (the threshold is lowered so

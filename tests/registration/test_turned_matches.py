@@ -116,6 +116,7 @@ def test_the_context_keeps_turn_zero_as_the_plain_descriptors(object_model):
     )
 
 
+@pytest.mark.slow
 def test_a_real_model_registers_with_matches_over_turns(object_model):
     source, target, truth = moved_samples()
     for turns in (2, 4):

@@ -15,6 +15,7 @@ from o3d_rpointhop.datasets import make_blob, make_object
 
 
 # ----------------------------------------------------------------------------- determinism
+@pytest.mark.slow
 def test_fit_is_deterministic_and_n_jobs_independent(train_clouds, cloud):
     a = RPointHopTransformer(random_state=0).fit(train_clouds)
     b = RPointHopTransformer(random_state=0, n_jobs=2).fit(train_clouds)
