@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import numbers
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from numbers import Integral, Real
 
@@ -26,6 +29,7 @@ __all__ = [
     "nearest_both_ways",
     "nearest_descriptors",
     "salient",
+    "shared_matches",
     "turned_correspondences",
     "unit_rows",
 ]
@@ -37,6 +41,25 @@ SALIENT_NEIGHBOURS = 10
 
 # Rows of the distance matrix computed at a time (bounded memory for large clouds).
 _CHUNK_ELEMENTS = 2**23
+
+# Inside shared_matches(): both ways' matches of descriptor arrays already matched, by
+# (id of the source array, id of the target array, max_ratio, k); each entry holds its
+# arrays, so that their ids stay theirs.
+_SHARED: ContextVar[dict | None] = ContextVar("o3d_rpointhop_shared_matches", default=None)
+
+
+@contextmanager
+def shared_matches() -> Iterator[None]:
+    """Within it, :func:`correspondences_both_ways` asked for two descriptor arrays it
+    has matched the other way round answers from those matches, swapped: the nearest
+    descriptors both ways are the same whichever array is the source (to the bit), so
+    registering a pair in both directions (a scan set's screening) matches it once. The
+    arrays must not change inside; each thread has its own."""
+    token = _SHARED.set({})
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
 
 
 @dataclass
@@ -437,6 +460,20 @@ def correspondences_both_ways(
     k = _checked_k(k)
     if k > 1 and max_ratio is not None:
         raise ValueError("max_ratio is defined on the nearest descriptor alone: not with k > 1")
+    memo = _SHARED.get()
+    if memo is not None:
+        swapped = memo.get((id(target_features), id(source_features), max_ratio, k))
+        if swapped is not None:
+            return swapped[1], swapped[0]
+    found = _both_ways(source_features, target_features, max_ratio, k)
+    if memo is not None:
+        key = (id(source_features), id(target_features), max_ratio, k)
+        memo[key] = (*found, source_features, target_features)
+    return found
+
+
+def _both_ways(source_features, target_features, max_ratio, k: int):
+    """:func:`correspondences_both_ways`, computed."""
     src, tgt = _feature_pair(source_features, target_features)
     if k > 1:
         k_src, k_tgt = min(k, len(tgt)), min(k, len(src))

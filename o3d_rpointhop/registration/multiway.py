@@ -43,6 +43,7 @@ from ..descriptors import PRETRAINED_MODELS
 from ..transforms import from_centred
 from .checks import RegistrationWarning
 from .context import RegistrationContext
+from .correspondences import shared_matches
 from .defaults import default_descriptor, resolve_global_points
 from .free_space import free_space_violation
 from .model_choice import resolve_model
@@ -146,18 +147,20 @@ def _register_pair(
         source, target, prepared_source, prepared_target, settings, seed, screening
     )
     if init is None:
-        transformation, fitness = _screened(context, settings, global_method)
-        if min_fitness is not None and fitness < min_fitness:
-            back_views = None if views is None else views[::-1]
-            back = _pair_context(
-                target, source, prepared_target, prepared_source, settings, seed, back_views
-            )
-            turned, back_fitness = _screened(back, settings, global_method)
-            if back_fitness > 0.0:
-                candidate = np.linalg.inv(turned)
-                forward = context.evaluate(context.to_local(candidate), edge).fitness
-                if forward > fitness:
-                    transformation, fitness = candidate, forward
+        # Screened the other way round too, the pair's descriptors are matched once.
+        with shared_matches():
+            transformation, fitness = _screened(context, settings, global_method)
+            if min_fitness is not None and fitness < min_fitness:
+                back_views = None if views is None else views[::-1]
+                back = _pair_context(
+                    target, source, prepared_target, prepared_source, settings, seed, back_views
+                )
+                turned, back_fitness = _screened(back, settings, global_method)
+                if back_fitness > 0.0:
+                    candidate = np.linalg.inv(turned)
+                    forward = context.evaluate(context.to_local(candidate), edge).fitness
+                    if forward > fitness:
+                        transformation, fitness = candidate, forward
         local = context.to_local(transformation)
     else:
         ((_, step),) = _pair_steps(settings, screen=False)

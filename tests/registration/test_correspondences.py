@@ -147,6 +147,35 @@ def test_matches_both_ways_are_the_two_calls_matches():
         correspondences_both_ways(a, b, k=0)
 
 
+def test_shared_matches_answer_the_other_way_round_as_computing_it(monkeypatch):
+    """Inside shared_matches(), matching two arrays the other way round reuses the
+    first matching, swapped, and gives what computing it gives, to the bit; outside,
+    and for other arrays or options, it computes."""
+    from o3d_rpointhop.registration import correspondences as module
+
+    a, b = _tied_descriptors(np.float32, 300, 250, seed=5)
+    computed = []
+    real = module._both_ways
+    monkeypatch.setattr(module, "_both_ways", lambda *args: computed.append(1) or real(*args))
+    for ratio, k in ((None, 1), (0.9, 1), (None, 2)):
+        want = module.correspondences_both_ways(b, a, max_ratio=ratio, k=k)
+        computed.clear()
+        with module.shared_matches():
+            module.correspondences_both_ways(a, b, max_ratio=ratio, k=k)
+            got = module.correspondences_both_ways(b, a, max_ratio=ratio, k=k)
+            assert len(computed) == 1  # the other way round came from the first
+            module.correspondences_both_ways(b, a.copy(), max_ratio=ratio, k=k)
+            assert len(computed) == 2  # another array is matched anew
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g.pairs, w.pairs)
+            np.testing.assert_array_equal(g.distances, w.distances)
+            np.testing.assert_array_equal(g.ratios, w.ratios)
+    computed.clear()
+    module.correspondences_both_ways(a, b)
+    module.correspondences_both_ways(b, a)
+    assert len(computed) == 2  # nothing is shared outside
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_the_compiled_candidates_are_the_argmin_passes(dtype, monkeypatch):
     """Large distance blocks take their candidates from one compiled pass per row: the
