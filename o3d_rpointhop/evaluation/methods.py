@@ -193,8 +193,8 @@ def _register_with(describe_with: Callable[[], Any] | None = None, **options):
     """A runner through :func:`~o3d_rpointhop.register` with ``options`` (a global step
     given as an estimator is cloned for each pair, a callable ``global_method`` called
     for each): it returns the whole result (the runner reads its transformation, its
-    flags and, for the records, what its global step saw). ``describe_with``: a factory of the descriptor to use instead of the
-    benchmark's (FPFH), one per pair."""
+    flags and, for the records, what its global step saw). ``describe_with``: a factory
+    of the descriptor to use instead of the benchmark's (FPFH), one per pair."""
 
     def run(source, target, descriptor, voxel, seed, viewpoints):
         chosen = _resolved(options)
