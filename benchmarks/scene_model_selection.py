@@ -58,6 +58,8 @@ CANDIDATES = {
     "1hop-96 (shipped)": ({}, "origin"),
     "1hop-96 (shipped) without viewpoints": ({}, None),
     "1hop-128": ({"n_neighbors": (128,)}, "origin"),
+    "1hop-96-fpfh": ({"attributes": ("xyz", "normal", "eigen", "fpfh")}, "origin"),
+    "1hop-96-xyz-fpfh": ({"attributes": ("xyz", "fpfh")}, "origin"),
 }  # fmt: skip
 
 

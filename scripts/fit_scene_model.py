@@ -10,10 +10,12 @@ names are stored in the model (``training_scenes_``) and in its file.
 
 Usage (one command, deterministic)::
 
-    .venv/bin/python scripts/fit_scene_model.py [--data PATH] [--output FILE]
+    .venv/bin/python scripts/fit_scene_model.py [--data PATH] [--output FILE] [--fpfh]
 
 Default output: ``o3d_rpointhop/data/rpointhop_scene.npz`` (what
-``RPointHopTransformer.pretrained("scene")`` loads).
+``RPointHopTransformer.pretrained("scene")`` loads); with ``--fpfh``, the variant with
+FPFH histograms among the hop-1 attributes, ``rpointhop_scene_fpfh.npz``
+(``pretrained("scene-fpfh")``).
 """
 
 from __future__ import annotations
@@ -24,29 +26,36 @@ from pathlib import Path
 
 from o3d_rpointhop.evaluation.scene_models import (
     FIT_POINTS,
+    SCENE_FPFH_PARAMS,
     SCENE_PARAMS,
     TRAINING_SCENES,
     fit_scene_model,
 )
 
-DEFAULT_OUTPUT = (
-    Path(__file__).resolve().parents[1] / "o3d_rpointhop" / "data" / "rpointhop_scene.npz"
-)
+DATA = Path(__file__).resolve().parents[1] / "o3d_rpointhop" / "data"
+DEFAULT_OUTPUT = DATA / "rpointhop_scene.npz"
+FPFH_OUTPUT = DATA / "rpointhop_scene_fpfh.npz"
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None, help="data folder (data_home())")
-    parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
+    parser.add_argument("--output", type=Path, default=None, help="the shipped file")
+    parser.add_argument(
+        "--fpfh", action="store_true", help="FPFH histograms among the hop-1 attributes"
+    )
     parser.add_argument("--n-global-points", type=int, default=FIT_POINTS)
     parser.add_argument("--lrf-neighbors", type=int, default=SCENE_PARAMS["lrf_neighbors"])
     args = parser.parse_args(argv)
+    if args.output is None:
+        args.output = FPFH_OUTPUT if args.fpfh else DEFAULT_OUTPUT
+    params = SCENE_FPFH_PARAMS if args.fpfh else SCENE_PARAMS
     start = time.perf_counter()
     model = fit_scene_model(
         TRAINING_SCENES,
         args.data,
         n_points=args.n_global_points,
-        lrf_neighbors=args.lrf_neighbors,
+        **{**params, "lrf_neighbors": args.lrf_neighbors},
     )
     args.output.parent.mkdir(parents=True, exist_ok=True)
     model.save(args.output)

@@ -8,7 +8,7 @@ import argparse
 PROG = "o3d-rpointhop"
 #: The shipped models' names (``descriptors.PRETRAINED_MODELS``, written out so that
 #: building the parser loads no library; a test keeps the two equal).
-SHIPPED_MODELS = ("modelnet40", "object", "scene")
+SHIPPED_MODELS = ("modelnet40", "object", "scene", "scene-fpfh")
 #: The trajectory formats (``poses.POSE_FORMATS``, written out for the same reason).
 POSE_FORMATS = ("kitti", "tum", "3dmatch")
 

@@ -13,12 +13,13 @@ PRETRAINED_MODELS = {
     "modelnet40": "rpointhop_modelnet40.npz",
     "object": "rpointhop_object.npz",
     "scene": "rpointhop_scene.npz",
+    "scene-fpfh": "rpointhop_scene_fpfh.npz",
 }
 #: What :meth:`RPointHopTransformer.pretrained` returns by default, by name: the
 #: ModelNet40 model's full descriptor (the paper's), the one-hop object model's full
-#: 24-D descriptor, and the scene model on the 96 principal axes it was chosen and
+#: 24-D descriptor, and the scene models on the 96 principal axes they were chosen and
 #: measured with (docs/model_card.md).
-PRETRAINED_COMPONENTS = {"modelnet40": None, "object": None, "scene": 96}
+PRETRAINED_COMPONENTS = {"modelnet40": None, "object": None, "scene": 96, "scene-fpfh": 96}
 
 
 def pretrained_path(name: str) -> AbstractContextManager[Path]:

@@ -68,7 +68,10 @@ class RPointHopTransformer(BaseDescriptor):
         ``"normal"``, their normals expressed in the point's LRF, and ``"eigen"``, seven
         features of their covariance eigenvalues (linearity, planarity, scattering,
         omnivariance, anisotropy, eigenentropy, change of curvature): the paper's scene
-        variant. Every attribute is rigid-invariant and finite on planes and edges; see
+        variant; ``"fpfh"``, their Fast Point Feature Histograms (33 bins over their
+        ``lrf_neighbors`` nearest, the frames' normal axes as normals), as the authors'
+        PCRP puts them in the first hop. Every attribute is rigid-invariant and finite
+        on planes and edges; see
         ``o3d_rpointhop.descriptors.pointhop._attributes``.
     energy_threshold : float, default=0.001
         Channels whose energy (share of the variance, multiplied down the tree) is below
@@ -490,7 +493,7 @@ class RPointHopTransformer(BaseDescriptor):
 
         Parameters
         ----------
-        name : {"modelnet40", "object", "scene"}
+        name : {"modelnet40", "object", "scene", "scene-fpfh"}
             ``"modelnet40"``: paper object settings (four hops), fitted on a ModelNet40
             train subset (144 shapes, 1024 random points each); see
             ``docs/model_card.md``. ``"object"``: one hop of 96 neighbours (24-D),
@@ -501,16 +504,20 @@ class RPointHopTransformer(BaseDescriptor):
             one hop of 96 neighbours, fitted with frames facing the sensor on 3DMatch
             fragments of four scenes, named in its ``training_scenes_``; made by
             ``scripts/fit_scene_model.py``. Describe with ``viewpoints`` (see
-            ``docs/model_card.md``).
+            ``docs/model_card.md``). ``"scene-fpfh"``: the same with FPFH histograms
+            among the hop-1 attributes (``scripts/fit_scene_model.py --fpfh``), an
+            option: more of its matches are right than the scene model's, for more
+            time (docs/benchmarks_3dmatch.md).
         n_components : int, None or "default", default="default"
             ``None``: the full descriptor (1624-D for ``"modelnet40"``, 24-D for
-            ``"object"``, 104-D for ``"scene"``). An int up to the axes the file holds
-            (128 for ``"modelnet40"``, 96 for ``"scene"``, none for ``"object"``): the
+            ``"object"``, 104-D for ``"scene"``, 368-D for ``"scene-fpfh"``). An int
+            up to the axes the file holds (128 for ``"modelnet40"``, 96 for the scene
+            models, none for ``"object"``): the
             descriptor's projection on that many principal axes, fitted on the same
             training data. ``"default"``: the model's own choice
             (``PRETRAINED_COMPONENTS``): the full descriptor for ``"modelnet40"`` and
             ``"object"``, the 96 axes every scene result was measured with for
-            ``"scene"``.
+            the scene models.
 
         Returns
         -------

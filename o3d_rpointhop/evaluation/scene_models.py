@@ -22,6 +22,7 @@ __all__ = [
     "FIT_POINTS",
     "FIT_VIEWPOINTS",
     "REGISTRATION_POINTS",
+    "SCENE_FPFH_PARAMS",
     "SCENE_PARAMS",
     "TRAINING_SCENES",
     "fit_scene_model",
@@ -48,6 +49,11 @@ SCENE_PARAMS = dict(
     n_components=96,
     random_state=0,
 )
+#: The scene model with FPFH histograms among its hop-1 attributes (what PCRP, the
+#: authors' retrieval work after R-PointHop, puts in its first hop): the shipped
+#: ``pretrained("scene-fpfh")``, an option (docs/benchmarks_3dmatch.md, "FPFH
+#: histograms in the first hop").
+SCENE_FPFH_PARAMS = dict(SCENE_PARAMS, attributes=("xyz", "normal", "eigen", "fpfh"))
 #: Every training fragment is downsampled as ``register()`` would for this many points
 #: (the density the model is used at).
 FIT_POINTS = 4096

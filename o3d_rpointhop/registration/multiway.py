@@ -328,7 +328,7 @@ def register_multiway(
     ----------
     clouds : list of array-like (n_k, 3) or Open3D point clouds
         At least two scans; sizes and resolutions may differ.
-    descriptor : "auto", {"object", "scene", "modelnet40"}, transformer or None, \
+    descriptor : "auto", a shipped model's name, transformer or None, \
             default="auto"
         ``"auto"``: the shipped model chosen from the scans as ``register()`` chooses
         it (:func:`~o3d_rpointhop.registration.model_choice.choose_model`): the scene

@@ -518,7 +518,7 @@ def register(
     ----------
     source, target : array-like (n, 3) or Open3D point cloud
         Any size and metric scale; not modified.
-    descriptor : "auto", {"object", "scene", "modelnet40"}, transformer or None, \
+    descriptor : "auto", a shipped model's name, transformer or None, \
             default="auto"
         ``"auto"``: the shipped model that serves these clouds, chosen from them
         (:func:`~o3d_rpointhop.registration.model_choice.choose_model`): the scene model,

@@ -16,12 +16,12 @@ from o3d_rpointhop.datasets import make_object
 
 #: A survey position (UTM easting, northing and a height, in metres).
 SURVEY = np.array([452_310.0, 5_211_870.0, 312.0])
-MODELS = ("modelnet40", "object", "scene", "fitted")
+MODELS = ("modelnet40", "object", "scene", "scene-fpfh", "fitted")
 
 
 @pytest.fixture(scope="module")
 def models(fitted) -> dict[str, RPointHopTransformer]:
-    shipped = {name: RPointHopTransformer.pretrained(name) for name in MODELS[:3]}
+    shipped = {name: RPointHopTransformer.pretrained(name) for name in MODELS[:-1]}
     return {**shipped, "fitted": fitted}
 
 

@@ -90,3 +90,39 @@ def test_shipped_scene_model():
     assert relative_difference(model.transform(room @ rot.T + shift), out) < 1e-4
     with pytest.raises(ValueError, match="unknown pretrained model 'kitchen'"):
         RPointHopTransformer.pretrained("kitchen")
+
+
+def test_shipped_scene_model_with_fpfh_registers_a_room():
+    from o3d_rpointhop import register
+
+    model = RPointHopTransformer.pretrained("scene-fpfh")
+    assert model.attributes == (*SCENE, "fpfh") and model.n_features_out_ == 96
+    assert model.training_scenes_ == RPointHopTransformer.pretrained("scene").training_scenes_
+    room = _room(4000, 6)
+    rot, shift = random_motion(6, 0.5)
+    moved = room @ rot.T + shift
+    result = register(room, moved, model)
+    expected = np.eye(4)
+    expected[:3, :3], expected[:3, 3] = rot, shift
+    np.testing.assert_allclose(result.transformation, expected, atol=1e-3)
+
+
+def test_fpfh_attribute_is_rigid_invariant_and_permutation_equivariant():
+    clouds = [make_object(1200, shape_seed=s) for s in range(3)] + [_room(1600, 1)]
+    model = RPointHopTransformer(attributes=(*SCENE, "fpfh"), random_state=0, **SMALL).fit(clouds)
+    assert model.kernels_[0].shape == (1, 368, 368)  # 8 octants x (3 + 3 + 7 + 33)
+    for seed, cloud in enumerate([_room(2000, 5), make_object(1500, shape_seed=7)]):
+        rot, shift = random_motion(seed, 100.0)
+        perm = np.random.default_rng(seed).permutation(len(cloud))
+        base = model.transform(cloud)
+        assert np.isfinite(base).all()
+        assert relative_difference(model.transform(cloud @ rot.T + shift), base) < 1e-5
+        np.testing.assert_allclose(model.transform(cloud[perm]), base[perm], rtol=0, atol=1e-5)
+
+
+def test_fpfh_attribute_on_a_sampled_first_hop():
+    # A first hop on half the points: every point still needs its own histogram.
+    params = dict(n_neighbors=(16, 16), hop_sizes=(0.5, 0.25), lrf_neighbors=32)
+    model = RPointHopTransformer(attributes=("xyz", "fpfh"), random_state=0, **params)
+    out = model.fit([_room(1600, s) for s in range(2)]).transform(_room(1500, 9))
+    assert out.shape == (1500, model.n_features_out_) and np.isfinite(out).all()

@@ -36,7 +36,7 @@ import numpy as np
 from ..._utils.compiled import kernel
 from ..._utils.kdtree import QUERY_CHUNK
 from ..._utils.threads import run_blocks
-from ._attributes import eigen_features
+from ._attributes import eigen_features, fpfh_features
 from ._config import HopConfig
 from ._frames import frame_of
 from ._neighbors import HopSearch, tie_ranks
@@ -445,7 +445,15 @@ def build_geometry(
                 arrays = (points, rows, neighbours, bins, frames, azimuth, out)
                 run_blocks(_normal_means, len(rows), n_threads, *arrays)
             else:
-                features = np.ascontiguousarray(eigen_features(eigenvalues))
+                if name == "eigen":
+                    features = np.ascontiguousarray(eigen_features(eigenvalues))
+                else:
+                    every = neighbours
+                    if queries[0] is not None:  # a sample: every point needs its own list
+                        every = HopSearch(points, ranks=ranks).neighbours(
+                            None, config.n_neighbors[0], n_threads=n_threads
+                        )[0]
+                    features = fpfh_features(points, frames[:, :, 2], every, n_threads)
                 out = np.empty((len(rows), features.shape[1] * N_OCTANTS))
                 run_blocks(_feature_means, len(rows), n_threads, neighbours, bins, features, out)
             blocks.append(out)

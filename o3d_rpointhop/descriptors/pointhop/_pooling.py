@@ -30,6 +30,7 @@ from ..._utils.threads import map_threads, run_blocks
 from ._octants import N_OCTANTS
 
 __all__ = [
+    "fold_first_hop",
     "fold_projection",
     "folded_projection",
     "matmul_blocks",
@@ -196,17 +197,21 @@ def folded_projection(
     components: np.ndarray,
     centre: np.ndarray,
     axes: np.ndarray,
+    *,
+    first_hop: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`fold_projection`, remembered for the last few models: the same arrays of
-    a fitted model (its last hop and its ``components``, not copies) and the same
-    number of axes give the same folded map without computing it again (about 1 ms
-    for the object model, a fortieth of describing 2k points)."""
+    """:func:`fold_projection` (or, with ``first_hop``, :func:`fold_first_hop`),
+    remembered for the last few models: the same arrays of a fitted model (its last hop
+    and its ``components``, not copies) and the same number of axes give the same
+    folded map without computing it again (about 1 ms for the object model, a fortieth
+    of describing 2k points)."""
     model = (kernels, means, selected, components)
-    key = (*map(id, model), axes.shape[1])
+    key = (*map(id, model), axes.shape[1], first_hop)
     hit = _FOLDS.get(key)
     if hit is not None and all(a is b for a, b in zip(hit[0], model, strict=True)):
         return hit[1]
-    folded = fold_projection(kernels, means, selected, centre, axes)
+    fold = fold_first_hop if first_hop else fold_projection
+    folded = fold(kernels, means, selected, centre, axes)
     _FOLDS[key] = (model, folded)
     while len(_FOLDS) > _FOLDS_KEPT:
         del _FOLDS[next(iter(_FOLDS))]
@@ -244,6 +249,28 @@ def fold_projection(
     spread = spread.reshape(n_channels, N_OCTANTS, n_axes)
     weights = np.matmul(kernels, spread).reshape(n_channels, -1)
     bias = -(means.reshape(1, -1) @ spread.reshape(-1, n_axes))[0] - centre @ axes
+    return weights.astype(np.float32), bias.astype(np.float32)
+
+
+def fold_first_hop(
+    kernels: np.ndarray,
+    means: np.ndarray,
+    selected: np.ndarray,
+    centre: np.ndarray,
+    axes: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A first hop that is the last one and the principal axes as one linear map.
+
+    Returns ``weights`` ``(dim, n_axes)`` float32 and ``bias`` ``(n_axes,)`` float32
+    such that the projection ``(outputs[selected] - centre) @ axes`` of a query's hop-1
+    Saab outputs (``attributes @ kernels[0] - means[0]``) equals ``attributes @ weights
+    + bias``: one product of the attributes' width by the axes' instead of the Saab
+    transform's square and then the projection. Computed in float64.
+    """
+    kernels = np.asarray(kernels[0], dtype=np.float32).astype(np.float64)
+    means = np.asarray(means[0], dtype=np.float32).astype(np.float64)
+    weights = kernels[:, selected] @ axes
+    bias = -(means[selected] @ axes) - centre @ axes
     return weights.astype(np.float32), bias.astype(np.float32)
 
 

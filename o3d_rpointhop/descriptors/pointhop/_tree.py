@@ -318,12 +318,19 @@ class HopTree:
         quarters = [4 * t // n_turns for t in range(n_turns)]
         if last == 0:
             attributes = geometry.hop1_attributes
+            folded = None
+            if projection is not None:
+                folded = folded_projection(
+                    self.kernels[0], self.means[0], self.selected[0], self.components,
+                    *projection, first_hop=True,
+                )  # fmt: skip
             for t, q in enumerate(quarters):
                 turned = attributes if q == 0 else turn_hop1(attributes, config.attributes, q)
-                described = self._first_hop(turned)
-                if projection is not None:
-                    described = matmul_blocks(described - projection[0], projection[1], n_threads)
-                out[t, order] = described
+                if folded is None:
+                    out[t, order] = self._first_hop(turned)
+                else:
+                    described = matmul_blocks(turned.astype(np.float32), folded[0], n_threads)
+                    out[t, order] = described + folded[1]
         else:
             previous = self.forward(geometry, last, n_threads, release=True)
             nb = geometry.hops[last - 1]

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from o3d_rpointhop.descriptors.pointhop._pooling import (
+    fold_first_hop,
     fold_projection,
     matmul_blocks,
     pool,
@@ -78,6 +79,22 @@ def test_the_folded_last_hop_is_the_projection_of_its_outputs(saab):
     out = pool_project(folded, nb, bins, bias)
     outputs = pool_saab(feats, nb, bins, kernels, means, selected)
     np.testing.assert_allclose(out, (outputs - centre) @ axes, rtol=1e-4, atol=1e-4)
+
+
+def test_a_folded_only_hop_is_the_projection_of_its_outputs():
+    rng = np.random.default_rng(11)
+    dim = 24
+    kernels = np.linalg.qr(rng.normal(size=(dim, dim)))[0][None]
+    means = rng.normal(size=(1, dim))
+    selected = np.array([5, 0, 23, 7, 11])
+    axes = rng.normal(size=(5, 3))
+    centre = rng.normal(size=5)
+    attributes = rng.normal(size=(50, dim)).astype(np.float32)
+    outputs = apply_saab(attributes.T[None].astype(np.float64), kernels, means)[0][selected].T
+    weights, bias = fold_first_hop(kernels, means, selected, centre, axes)
+    np.testing.assert_allclose(
+        attributes @ weights + bias, (outputs - centre) @ axes, rtol=1e-5, atol=1e-5
+    )
 
 
 def test_matmul_blocks_are_the_same_bytes_on_any_number_of_threads():
