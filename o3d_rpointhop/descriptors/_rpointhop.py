@@ -507,7 +507,7 @@ class RPointHopTransformer(BaseDescriptor):
             ``docs/model_card.md``). ``"scene-fpfh"``: the same with FPFH histograms
             among the hop-1 attributes (``scripts/fit_scene_model.py --fpfh``), an
             option: more of its matches are right than the scene model's, for more
-            time (docs/benchmarks_3dmatch.md).
+            time (docs/low_overlap.md).
         n_components : int, None or "default", default="default"
             ``None``: the full descriptor (1624-D for ``"modelnet40"``, 24-D for
             ``"object"``, 104-D for ``"scene"``, 368-D for ``"scene-fpfh"``). An int

@@ -51,8 +51,8 @@ SCENE_PARAMS = dict(
 )
 #: The scene model with FPFH histograms among its hop-1 attributes (what PCRP, the
 #: authors' retrieval work after R-PointHop, puts in its first hop): the shipped
-#: ``pretrained("scene-fpfh")``, an option (docs/benchmarks_3dmatch.md, "FPFH
-#: histograms in the first hop").
+#: ``pretrained("scene-fpfh")``, an option (docs/low_overlap.md, "FPFH histograms in
+#: the first hop").
 SCENE_FPFH_PARAMS = dict(SCENE_PARAMS, attributes=("xyz", "normal", "eigen", "fpfh"))
 #: Every training fragment is downsampled as ``register()`` would for this many points
 #: (the density the model is used at).
