@@ -68,10 +68,10 @@ class RPointHopTransformer(BaseDescriptor):
         ``"normal"``, their normals expressed in the point's LRF, and ``"eigen"``, seven
         features of their covariance eigenvalues (linearity, planarity, scattering,
         omnivariance, anisotropy, eigenentropy, change of curvature): the paper's scene
-        variant; ``"fpfh"``, their Fast Point Feature Histograms (33 bins over their
-        ``lrf_neighbors`` nearest, the frames' normal axes as normals), as the authors'
-        PCRP puts them in the first hop. Every attribute is rigid-invariant and finite
-        on planes and edges; see
+        variant; ``"fpfh"``, their Fast Point Feature Histograms (33 bins, each over
+        the neighbour's own first-hop neighbourhood, the frames' normal axes as
+        normals), as the authors' PCRP puts them in the first hop. Every attribute is
+        rigid-invariant and finite on planes and edges; see
         ``o3d_rpointhop.descriptors.pointhop._attributes``.
     energy_threshold : float, default=0.001
         Channels whose energy (share of the variance, multiplied down the tree) is below

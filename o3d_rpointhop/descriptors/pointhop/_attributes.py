@@ -62,9 +62,8 @@ def check_attributes(value: Any) -> tuple[str, ...]:
     unknown = [n for n in names if n not in ATTRIBUTE_CHANNELS]
     if unknown or len(set(names)) != len(names) or not names or names[0] != "xyz":
         raise ValueError(
-            f"attributes must start with 'xyz' and may add 'normal', 'eigen' and 'fpfh', each "
-            f"once; "
-            f"got {value!r}"
+            "attributes must start with 'xyz' and may add 'normal', 'eigen' and 'fpfh', "
+            f"each once; got {value!r}"
         )
     return names
 
