@@ -20,6 +20,17 @@ def _room(n: int = 3000, seed: int = 0) -> np.ndarray:
     return make_room(n, random_state=seed)
 
 
+def _assert_moves_with_the_cloud(model, cloud, seed: int, bound: float) -> None:
+    """Finite descriptors, within ``bound`` (relative) after a seeded rigid motion and
+    equal to 1e-5 after a seeded permutation of the points."""
+    rot, shift = random_motion(seed, 100.0)
+    perm = np.random.default_rng(seed).permutation(len(cloud))
+    base = model.transform(cloud)
+    assert np.isfinite(base).all()
+    assert relative_difference(model.transform(cloud @ rot.T + shift), base) < bound
+    np.testing.assert_allclose(model.transform(cloud[perm]), base[perm], rtol=0, atol=1e-5)
+
+
 @pytest.fixture(scope="module")
 def scene_model():
     clouds = [make_object(1200, shape_seed=s) for s in range(4)] + [_room(1600, 1)]
@@ -36,12 +47,7 @@ def test_scene_model_layout(scene_model):
 @given(st.integers(0, 10_000))
 def test_scene_attributes_are_rigid_invariant_and_permutation_equivariant(scene_model, seed):
     cloud = _room(2000, seed) if seed % 2 else make_object(1500, shape_seed=seed % 40)
-    rot, shift = random_motion(seed, 100.0)
-    perm = np.random.default_rng(seed).permutation(len(cloud))
-    base = scene_model.transform(cloud)
-    assert np.isfinite(base).all()
-    assert relative_difference(scene_model.transform(cloud @ rot.T + shift), base) < 1e-4
-    np.testing.assert_allclose(scene_model.transform(cloud[perm]), base[perm], rtol=0, atol=1e-5)
+    _assert_moves_with_the_cloud(scene_model, cloud, seed, 1e-4)
 
 
 def test_planes_edges_and_duplicates_stay_finite(scene_model):
@@ -112,12 +118,7 @@ def test_fpfh_attribute_is_rigid_invariant_and_permutation_equivariant():
     model = RPointHopTransformer(attributes=(*SCENE, "fpfh"), random_state=0, **SMALL).fit(clouds)
     assert model.kernels_[0].shape == (1, 368, 368)  # 8 octants x (3 + 3 + 7 + 33)
     for seed, cloud in enumerate([_room(2000, 5), make_object(1500, shape_seed=7)]):
-        rot, shift = random_motion(seed, 100.0)
-        perm = np.random.default_rng(seed).permutation(len(cloud))
-        base = model.transform(cloud)
-        assert np.isfinite(base).all()
-        assert relative_difference(model.transform(cloud @ rot.T + shift), base) < 1e-5
-        np.testing.assert_allclose(model.transform(cloud[perm]), base[perm], rtol=0, atol=1e-5)
+        _assert_moves_with_the_cloud(model, cloud, seed, 1e-5)
 
 
 def test_fpfh_attribute_on_a_sampled_first_hop():
