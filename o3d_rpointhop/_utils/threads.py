@@ -121,25 +121,49 @@ def core_budget(n_jobs: int | None) -> Iterator[None]:
 def map_threads(func: Callable, items: Sequence, n_threads: int) -> None:
     """``func(*item)`` for every item, on up to ``n_threads`` threads: the calling thread
     and a pool kept for the process (the calling thread alone when ``n_threads <= 1``,
-    and inside the pool's own threads). Each call writes its own part of some output,
-    so the order in which calls finish does not matter; an exception raised by a call
-    is raised here (the first failing item's, in item order), after the other calls
-    have ended. The work
-    is compiled kernels, numpy and Open3D calls that release the GIL. A process forked
-    from this one starts a pool of its own (threads do not survive a fork)."""
+    and inside the pool's own threads). Every thread takes the next item not yet taken
+    until none is left, so many small items (blocks of a matrix product, hypotheses to
+    score) are shared evenly. Each call writes its own part of some output, so which
+    thread runs it and the order in which calls finish do not matter; an exception
+    raised by a call is raised here (the first failing item's, in item order), after
+    the other calls have ended. The work is compiled kernels, numpy and Open3D calls
+    that release the GIL. A process forked from this one starts a pool of its own
+    (threads do not survive a fork)."""
     inside = threading.current_thread().name.startswith(_PREFIX)
     if n_threads <= 1 or len(items) <= 1 or inside:
         for item in items:
             func(*item)
         return
-    pool = _executor(min(n_threads, len(items)) - 1)  # the calling thread is one
-    futures = [pool.submit(func, *item) for item in items[1:]]
+    taken = iter(range(len(items)))
+    lock = threading.Lock()
+    errors: dict[int, Exception] = {}
+    stop = threading.Event()
+
+    def drain() -> None:
+        while not stop.is_set():
+            with lock:
+                k = next(taken, None)
+            if k is None:
+                return
+            try:
+                func(*items[k])
+            except Exception as error:  # raised by the caller once every call has ended
+                errors[k] = error
+            except BaseException:
+                stop.set()  # an interrupt: take no more items
+                raise
+
+    workers = min(n_threads, len(items))
+    pool = _executor(workers - 1)  # the calling thread is one
+    futures = [pool.submit(drain) for _ in range(workers - 1)]
     try:
-        func(*items[0])
+        drain()
     finally:
         wait(futures)
     for future in futures:
         future.result()
+    if errors:
+        raise errors[min(errors)]
 
 
 def run_blocks(func: Callable, n: int, n_threads: int, *args, align: int = 1) -> None:

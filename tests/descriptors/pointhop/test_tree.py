@@ -179,6 +179,26 @@ def test_map_threads_runs_every_item_and_raises_a_failure(n_threads):
         map_threads(fail, [(0, 3), (3, 7), (7, 10)], n_threads)
 
 
+def test_map_threads_shares_many_items_between_the_threads():
+    """The calling thread keeps taking items while the pool's thread works, instead of
+    running the first and waiting for the other thread to run all the rest."""
+    import threading
+    import time
+
+    from o3d_rpointhop._utils.threads import map_threads
+
+    ran = []
+
+    def step(k):
+        time.sleep(0.01)  # releases the GIL, as the kernels do
+        ran.append((k, threading.current_thread() is threading.main_thread()))
+
+    map_threads(step, [(k,) for k in range(12)], 2)
+    assert sorted(k for k, _ in ran) == list(range(12))
+    on_caller = sum(caller for _, caller in ran)
+    assert 2 <= on_caller <= 10
+
+
 def test_run_blocks_cuts_at_multiples_of_the_alignment():
     from o3d_rpointhop._utils.threads import run_blocks
 
