@@ -326,6 +326,18 @@ def _nearest_of_lists(
             out_sq[i, e] = (o0 * o0 + o1 * o1) + o2 * o2
 
 
+@kernel(nogil=True)
+def _death_radii(start, stop, sq, idx, priority, death):  # pragma: no cover - compiled
+    """For the rows ``start:stop``, the squared distance to the nearest competitor of
+    higher priority (infinite if none has)."""
+    for i in range(start, stop):
+        radius = np.inf
+        for e in range(idx.shape[1]):
+            if priority[idx[i, e]] > priority[i] and sq[i, e] < radius:
+                radius = sq[i, e]
+        death[i] = radius
+
+
 def _thin(
     points: np.ndarray,
     m: int,
@@ -360,8 +372,8 @@ def _thin(
     positive = nearest[nearest > 0]
     spacing = float(np.sqrt(np.median(positive))) if positive.size else 1.0
     priority = priorities(points, spacing)
-    stronger = priority[idx] > priority[:, None]
-    death = np.where(stronger, sq, np.inf).min(axis=1)
+    death = np.empty(n)
+    run_blocks(_death_radii, n, n_threads, sq, idx, priority, death)
     # The m largest death radii; ties (equal distances, and the local maxima's infinite
     # radii) by the higher priority: both move with the cloud.
     order = np.lexsort((-priority, -death))
