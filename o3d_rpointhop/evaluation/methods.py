@@ -46,6 +46,7 @@ __all__ = [
     "default_methods",
     "check_methods",
     "claimed_by",
+    "pooled_hypotheses_step",
     "pooled_step",
     "scene_with_fpfh",
     "shipped_scene_model",
@@ -182,6 +183,20 @@ def pooled_step(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
                 ),
             ]
         )
+    )
+
+
+def pooled_hypotheses_step(n_hypotheses: int | str = "auto") -> ConsensusGlobal:
+    """One consensus on the model's matches and one on FPFH's (each nearest both ways,
+    at most 4000, as each runs alone), every hypothesis of both verified together
+    (``n_hypotheses`` of each)."""
+    both = Matcher(both_directions=True, max_matches=4000)
+    return ConsensusGlobal(
+        matcher=PooledMatcher(
+            [("model", None, both), ("fpfh", FPFHTransformer(), clone(both))],
+            combine="hypotheses",
+        ),
+        n_hypotheses=n_hypotheses,
     )
 
 
@@ -432,6 +447,17 @@ METHODS = _methods(
             (3000, 1000, 50),
             (4000, 1000, 50),
         )
+    ),
+    *(
+        Method(
+            f"rpointhop-scene-pooled-hypotheses{suffix}",
+            "R-PointHop, shipped scene model: one consensus on its matches and one on "
+            f"FPFH's, {count} hypotheses of each verified together + point-to-plane ICP",
+            _register_with(global_method=pooled_hypotheses_step(n)),
+            datasets=_SCENES,
+            model="scene",
+        )
+        for suffix, count, n in (("", "16 (auto)", "auto"), ("-8", "8", 8))
     ),
     Method(
         "rpointhop-scene-fpfh",

@@ -289,11 +289,21 @@ class PooledMatcher(BaseEstimator):
     more pairs that overlap little than either part alone (docs/low_overlap.md,
     "Pooled matches").
 
+    With ``combine="hypotheses"`` the parts are kept apart one step further: the
+    consensus runs on each part's matches alone and its hypotheses, every part's, are
+    verified together (:class:`~o3d_rpointhop.ConsensusGlobal` only). Each descriptor
+    then finds what it would find alone, and the overlap and free-space checks choose:
+    the first part's best hypothesis is the step's own choice, which another replaces
+    only when it scores 30 % higher (docs/low_overlap.md, "Pooled hypotheses").
+
     Parameters
     ----------
     parts : list of (str, transformer or None, Matcher)
         Each part's name, descriptor (``None``: the step's own, else the pipeline's)
         and matcher. Names are distinct; two parts may share a descriptor.
+    combine : {"matches", "hypotheses"}, default="matches"
+        What is pooled: the parts' matches, for one consensus (any global step), or
+        the hypotheses of one consensus per part (:class:`~o3d_rpointhop.ConsensusGlobal`).
 
     Examples
     --------
@@ -308,8 +318,9 @@ class PooledMatcher(BaseEstimator):
     >>> step = ConsensusGlobal(matcher=pooled)
     """
 
-    def __init__(self, parts: list) -> None:
+    def __init__(self, parts: list, combine: str = "matches") -> None:
         self.parts = parts
+        self.combine = combine
 
     def validate(self) -> None:
         """Check the parts and each part's matcher.
@@ -321,6 +332,10 @@ class PooledMatcher(BaseEstimator):
         """
         if not isinstance(self.parts, (list, tuple)) or not self.parts:
             raise ValueError(f"PooledMatcher: parts must be a non-empty list, got {self.parts!r}")
+        if self.combine not in ("matches", "hypotheses"):
+            raise ValueError(
+                f"PooledMatcher: combine must be 'matches' or 'hypotheses', got {self.combine!r}"
+            )
         names = set()
         for part in self.parts:
             if not (isinstance(part, tuple) and len(part) == 3):

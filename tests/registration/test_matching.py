@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sklearn.base import clone
+from sklearn.base import BaseEstimator, TransformerMixin, clone
 
 from o3d_rpointhop import (
     ConsensusGlobal,
@@ -190,3 +190,51 @@ def test_a_pooled_step_matches_with_every_part_and_registers():
     assert_close_pose(result.transformation, truth, 2.0, 0.02)
     copy = clone(step)
     assert copy.matcher is not pooled and copy.matcher.parts[1][1].radius == 0.3
+
+
+class _Noise(TransformerMixin, BaseEstimator):
+    """Descriptors that say nothing: every point's row is noise."""
+
+    def fit(self, X, y=None):
+        return self
+
+    def transform(self, X):
+        n = len(np.asarray(X.points))  # given an Open3D cloud
+        return np.random.default_rng(n).normal(size=(n, 8))
+
+
+def test_pooled_hypotheses_let_the_part_that_sees_the_pose_win():
+    """One consensus per part, every part's hypotheses verified together: a part whose
+    matches are noise gives the first hypotheses, the FPFH part's right one wins."""
+    from helpers import assert_close_pose, moved_copy
+
+    from o3d_rpointhop.datasets import make_object
+
+    target = make_object(2500, shape_seed=3, sample_seed=1)
+    source, truth = moved_copy(target, seed=2)
+    parts = [("noise", _Noise(), _both(300)), ("fpfh", FPFHTransformer(), _both(300))]
+    step = ConsensusGlobal(matcher=PooledMatcher(parts, combine="hypotheses"), n_hypotheses=3)
+    result = register(source, target, FPFHTransformer(), global_method=step)
+    assert_close_pose(result.transformation, truth, 2.0, 0.02)
+    info = result.steps[0].info
+    assert 4 <= len(info["hypothesis_scores"]) <= 6  # both parts' hypotheses
+    assert info["chosen_hypothesis"] >= len(info["hypothesis_scores"]) - 3  # FPFH's
+    assert 300 < info["candidate_matches"] <= 600  # scored against the pooled matches
+    noise_only = ConsensusGlobal(matcher=_both(300), n_hypotheses=3)
+    with pytest.warns(Warning, match="did not converge"):
+        wrong = register(source, target, _Noise(), global_method=noise_only)
+    assert not np.allclose(wrong.transformation, truth, atol=0.05)
+
+
+@pytest.mark.parametrize("step", [RANSACGlobal, FGRGlobal, SVDGlobal])
+def test_only_the_consensus_pools_hypotheses(step):
+    pooled = PooledMatcher([("a", None, _both(10))], combine="hypotheses")
+    with pytest.raises(ValueError, match="combine='hypotheses' needs ConsensusGlobal"):
+        register(
+            np.random.default_rng(0).normal(size=(300, 3)),
+            np.random.default_rng(1).normal(size=(300, 3)),
+            FPFHTransformer(),
+            global_method=step(matcher=pooled),
+        )
+    with pytest.raises(ValueError, match="combine must be"):
+        PooledMatcher([("a", None, _both(10))], combine="poses").validate()

@@ -48,6 +48,7 @@ __all__ = [
     "compatibility_graphs",
     "consensus",
     "consensus_sets",
+    "pooled",
     "truncated_scores",
 ]
 
@@ -528,4 +529,19 @@ def consensus(
         n_hypotheses=len(seeds),
         seeds=seeds,
         hypotheses=hypotheses,
+    )
+
+
+def pooled(results: list[ConsensusResult]) -> ConsensusResult:
+    """Several consensus runs' hypotheses as one result, each run's best first and the
+    runs in order: the first run with an estimate gives the transformation (its
+    ``inliers`` and ``seeds`` are about its own matches); ``n_hypotheses`` counts every
+    run's."""
+    first = next((r for r in results if len(r.hypotheses)), results[0])
+    return ConsensusResult(
+        transformation=first.transformation,
+        inliers=first.inliers,
+        n_hypotheses=sum(r.n_hypotheses for r in results),
+        seeds=first.seeds,
+        hypotheses=np.concatenate([r.hypotheses for r in results]),
     )

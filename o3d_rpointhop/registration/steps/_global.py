@@ -115,15 +115,30 @@ class GlobalStep(RegistrationStep):
     def _descriptors(self) -> tuple:
         return tuple((descriptor, matcher.frame_turns) for descriptor, matcher in self._parts())
 
-    def _check_params(self) -> None:
-        self._matcher().validate()
+    #: Whether the step can run once per part of a matcher that pools hypotheses
+    #: (``PooledMatcher(..., combine="hypotheses")``).
+    pools_hypotheses = False
 
-    def _matches(self, context: RegistrationContext) -> Correspondences:
-        """The step's matches (source index, target index): each matcher on both clouds'
-        descriptors as it compares them (under every turn, ``(frame_turns, n, width)``,
-        or plain; scaled to unit length for the cosine metric: the context computes and
-        scales them once per registration), pooled when there are several."""
-        found = [
+    def _check_params(self) -> None:
+        matcher = self._matcher()
+        matcher.validate()
+        if self._pooled_hypotheses() and not self.pools_hypotheses:
+            raise ValueError(
+                f"{type(self).__name__} pools matches only: a PooledMatcher with "
+                "combine='hypotheses' needs ConsensusGlobal"
+            )
+
+    def _pooled_hypotheses(self) -> bool:
+        """Whether the matcher pools the hypotheses of one run per part."""
+        matcher = self._matcher()
+        return isinstance(matcher, PooledMatcher) and matcher.combine == "hypotheses"
+
+    def _part_matches(self, context: RegistrationContext) -> list[Correspondences]:
+        """Each part's matches (source index, target index): its matcher on both
+        clouds' descriptors as it compares them (under every turn, ``(frame_turns, n,
+        width)``, or plain; scaled to unit length for the cosine metric: the context
+        computes and scales them once per registration)."""
+        return [
             matcher._match(
                 *(
                     context.features(descriptor, which, matcher.frame_turns, matcher.unit)
@@ -133,6 +148,10 @@ class GlobalStep(RegistrationStep):
             )
             for descriptor, matcher in self._parts()
         ]
+
+    def _matches(self, context: RegistrationContext) -> Correspondences:
+        """The step's matches: :meth:`_part_matches`, pooled when there are several."""
+        found = self._part_matches(context)
         return found[0] if len(found) == 1 else PooledMatcher.pool(found)
 
     @staticmethod

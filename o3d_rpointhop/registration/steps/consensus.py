@@ -11,10 +11,10 @@ import numpy as np
 from ..._utils.params import Interval, StrOptions
 from ..._utils.threads import kernel_threads
 from ..context import RegistrationContext
-from ..matching import Matcher
+from ..matching import Matcher, PooledMatcher
 from ..result import StepResult
 from ._base import OPTIONAL_DISTANCE
-from ._consensus import consensus
+from ._consensus import consensus, pooled
 from ._global import DESCRIPTOR, HYPOTHESES, MATCHER, GlobalStep, with_shared_docs
 
 __all__ = ["SENSOR_HYPOTHESES", "SENSOR_MAX_VIOLATION", "ConsensusGlobal"]
@@ -85,6 +85,7 @@ class ConsensusGlobal(GlobalStep):
     """
 
     name = "consensus"
+    pools_hypotheses = True
 
     _parameter_constraints = {
         "descriptor": DESCRIPTOR,
@@ -140,10 +141,20 @@ class ConsensusGlobal(GlobalStep):
         return SENSOR_HYPOTHESES if context.viewpoints is not None else 1
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
+        distance = self.max_correspondence_distance or context.settings.ransac_distance
+        if self._pooled_hypotheses():
+            parts = self._part_matches(context)
+            found = pooled([self._consensus(context, corr, distance) for corr in parts])
+            corr = PooledMatcher.pool(parts)
+        else:
+            corr = self._matches(context)
+            found = self._consensus(context, corr, distance)
+        return self._result_of(context, found, distance, corr, hypotheses=found.n_hypotheses)
+
+    def _consensus(self, context: RegistrationContext, corr, distance: float):
+        """The consensus on the matches ``corr``."""
         settings = context.settings
-        distance = self.max_correspondence_distance or settings.ransac_distance
-        corr = self._matches(context)
-        found = consensus(
+        return consensus(
             *self._matched(context, corr),
             compatibility_threshold=settings.consensus_distance,
             inlier_threshold=distance,
@@ -158,4 +169,3 @@ class ConsensusGlobal(GlobalStep):
             n_hypotheses=self._n_hypotheses(context),
             n_threads=kernel_threads(self.n_jobs),
         )
-        return self._result_of(context, found, distance, corr, hypotheses=found.n_hypotheses)
