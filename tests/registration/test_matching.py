@@ -218,7 +218,9 @@ def test_pooled_hypotheses_let_the_part_that_sees_the_pose_win():
     assert_close_pose(result.transformation, truth, 2.0, 0.02)
     info = result.steps[0].info
     assert 4 <= len(info["hypothesis_scores"]) <= 6  # both parts' hypotheses
-    assert info["chosen_hypothesis"] >= len(info["hypothesis_scores"]) - 3  # FPFH's
+    parts_of = info["hypothesis_parts"]
+    assert len(parts_of) == len(info["hypothesis_scores"]) and parts_of[0] == "noise"
+    assert parts_of[info["chosen_hypothesis"]] == "fpfh"
     assert 300 < info["candidate_matches"] <= 600  # scored against the pooled matches
     noise_only = ConsensusGlobal(matcher=_both(300), n_hypotheses=3)
     with pytest.warns(Warning, match="did not converge"):

@@ -142,14 +142,22 @@ class ConsensusGlobal(GlobalStep):
 
     def _run(self, context: RegistrationContext, transformation: np.ndarray) -> StepResult:
         distance = self.max_correspondence_distance or context.settings.ransac_distance
+        info = {}
         if self._pooled_hypotheses():
             parts = self._part_matches(context)
-            found = pooled([self._consensus(context, corr, distance) for corr in parts])
-            corr = PooledMatcher.pool(parts)
+            runs = [self._consensus(context, corr, distance) for corr in parts]
+            found, corr = pooled(runs), PooledMatcher.pool(parts)
+            # Which part each verified hypothesis came from, in their order.
+            names = [name for name, _, _ in self._matcher().parts]
+            info["hypothesis_parts"] = [
+                n for n, r in zip(names, runs, strict=True) for _ in r.hypotheses
+            ]
         else:
             corr = self._matches(context)
             found = self._consensus(context, corr, distance)
-        return self._result_of(context, found, distance, corr, hypotheses=found.n_hypotheses)
+        return self._result_of(
+            context, found, distance, corr, hypotheses=found.n_hypotheses, **info
+        )
 
     def _consensus(self, context: RegistrationContext, corr, distance: float):
         """The consensus on the matches ``corr``."""
