@@ -186,14 +186,20 @@ def pooled_step(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
     )
 
 
-def pooled_hypotheses_step(n_hypotheses: int | str = "auto") -> ConsensusGlobal:
-    """One consensus on the model's matches and one on FPFH's (each nearest both ways,
-    at most 4000, as each runs alone), every hypothesis of both verified together
-    (``n_hypotheses`` of each)."""
-    both = Matcher(both_directions=True, max_matches=4000)
+def pooled_hypotheses_step(
+    n_hypotheses: int | str = "auto", fpfh_max_nn: int = 100, fpfh_matches: int = 4000
+) -> ConsensusGlobal:
+    """One consensus on the model's matches (nearest both ways, at most 4000, as it runs
+    alone) and one on FPFH's (its histograms on at most ``fpfh_max_nn`` neighbours, at
+    most ``fpfh_matches``), every hypothesis of both verified together (``n_hypotheses``
+    of each)."""
+    fpfh = FPFHTransformer(max_nn=fpfh_max_nn)
     return ConsensusGlobal(
         matcher=PooledMatcher(
-            [("model", None, both), ("fpfh", FPFHTransformer(), clone(both))],
+            [
+                ("model", None, Matcher(both_directions=True, max_matches=4000)),
+                ("fpfh", fpfh, Matcher(both_directions=True, max_matches=fpfh_matches)),
+            ],
             combine="hypotheses",
         ),
         n_hypotheses=n_hypotheses,
@@ -452,12 +458,17 @@ METHODS = _methods(
         Method(
             f"rpointhop-scene-pooled-hypotheses{suffix}",
             "R-PointHop, shipped scene model: one consensus on its matches and one on "
-            f"FPFH's, {count} hypotheses of each verified together + point-to-plane ICP",
-            _register_with(global_method=pooled_hypotheses_step(n)),
+            f"FPFH's{fpfh}, {count} hypotheses of each verified together + point-to-plane "
+            "ICP",
+            _register_with(global_method=pooled_hypotheses_step(*args)),
             datasets=_SCENES,
             model="scene",
         )
-        for suffix, count, n in (("", "16 (auto)", "auto"), ("-8", "8", 8))
+        for suffix, fpfh, count, args in (
+            ("", "", "16 (auto)", ("auto",)),
+            ("-8", "", "8", (8,)),
+            ("-8-2000-nn50", " (at most 2000, 50 neighbours)", "8", (8, 50, 2000)),
+        )
     ),
     Method(
         "rpointhop-scene-fpfh",
