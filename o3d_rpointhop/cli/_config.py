@@ -28,10 +28,13 @@ __all__ = [
     "step_classes",
     "settings_section",
     "to_toml",
+    "recorded_matcher",
+    "with_fpfh",
 ]
 
 #: ``[register]``: the arguments of ``register()`` (``register_multiway()`` takes all
-#: but the refinement) the command line also has as flags.
+#: but the refinement) the command line also has as flags, and ``with_fpfh``: the
+#: consensus's matches beside FPFH's (:meth:`PooledMatcher.with_fpfh`).
 REGISTER_KEYS = {
     "global_method": "auto",
     "refine": "point_to_plane",
@@ -41,6 +44,7 @@ REGISTER_KEYS = {
     "symmetry_check": False,
     "viewpoints": "auto",
     "up": None,
+    "with_fpfh": False,
 }
 #: ``[descriptor]``: which descriptor a command describes with (``model``: a shipped
 #: model's name or a model file; unset: the command's default) and on how many axes and
@@ -191,3 +195,36 @@ def estimator_section(estimator: Any) -> dict[str, Any]:
     thread count: those are not settings)."""
     params = estimator.get_params(deep=False)
     return {k: v for k, v in params.items() if k not in _NOT_SETTINGS and k != "n_jobs"}
+
+
+def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
+    """The global ``step`` as ``[register] with_fpfh`` makes it: when true, the consensus
+    with its matches beside FPFH's, one consensus each, every hypothesis verified
+    together (docs/low_overlap.md). Left as it is while the model is still to be chosen
+    (``descriptor`` None, ``global_method`` "auto"): the call after the choice decides."""
+    from ..registration import ConsensusGlobal, PooledMatcher
+
+    value = register["with_fpfh"]
+    if not isinstance(value, bool):
+        raise UsageError(f"[register] with_fpfh must be true or false, got {value!r}")
+    if not value or (descriptor is None and register["global_method"] == "auto"):
+        return step
+    if not isinstance(step, ConsensusGlobal):
+        name = "none" if step is None else type(step).name
+        raise UsageError(
+            f"--with-fpfh needs the consensus as the global step, got {name} (--global "
+            "consensus; the scene model's default is the consensus)"
+        )
+    matcher = step.matcher if step.matcher is not None else step.default_matcher()
+    return step.set_params(matcher=PooledMatcher.with_fpfh(matcher))
+
+
+def recorded_matcher(step: Any) -> tuple[bool, Any]:
+    """A global step's matcher as a config records it: whether FPFH's matches are
+    beside it (``with_fpfh``), and the matcher of the step's own descriptor."""
+    from ..registration import PooledMatcher
+
+    matcher = step.matcher if step.matcher is not None else step.default_matcher()
+    if isinstance(matcher, PooledMatcher):
+        return True, matcher.parts[0][2]
+    return False, matcher

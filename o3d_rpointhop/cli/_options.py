@@ -8,7 +8,7 @@ import argparse
 from typing import Any
 
 from ._common import UsageError
-from ._config import OBJECT_PARAMETERS, REGISTER_KEYS, settings_section, step_classes
+from ._config import OBJECT_PARAMETERS, REGISTER_KEYS, settings_section, step_classes, with_fpfh
 
 __all__ = [
     "add_edge_limits",
@@ -57,7 +57,7 @@ def registration_options(
         except (ValueError, TypeError) as exc:
             raise UsageError(f"[{_section_of(step)[0]}]: {exc}") from None
     _check_unused_steps(config, {_section_of(step)[0] for _, step in chain})
-    first = chain[0][1] if chain[0][0] == "global" else None
+    first = with_fpfh(chain[0][1] if chain[0][0] == "global" else None, register, descriptor)
     rest = [step for name, step in chain if name != "global"]
     settings = config.get("settings")
     try:
@@ -159,6 +159,7 @@ def used_config(
     section with every parameter, every setting, and ``[descriptor]`` (and ``[fpfh]``)
     as given. ``extra``: further sections (``[multiway]``)."""
     from ..registration import SymmetryCheck
+    from ._config import recorded_matcher
 
     config: dict[str, dict[str, Any]] = {}
     register: dict[str, Any] = {
@@ -177,7 +178,7 @@ def used_config(
         register["global_method"], config_params = _section_of(step)
         config[register["global_method"]] = config_params
         if "matcher" in step.get_params(deep=False):
-            matcher = step.matcher if step.matcher is not None else step.default_matcher()
+            register["with_fpfh"], matcher = recorded_matcher(step)
             config[f"{register['global_method']}.matcher"] = matcher.get_params()
     if "refine" in options:
         chain = list(options["refine"] or [])

@@ -58,6 +58,14 @@ def add_parser(commands) -> None:
         "training data: consensus for --model scene, else ransac; with --descriptor fpfh "
         "on indoor scans, consensus wins)",
     )
+    p.add_argument(
+        "--with-fpfh",
+        action="store_true",
+        default=None,
+        help="the consensus on FPFH's matches too, every hypothesis of both verified "
+        "together: more pairs that overlap little, about twice the time "
+        "(docs/low_overlap.md, 'Pooled hypotheses')",
+    )
     refinements = [name for name in REFINE_METHODS if name != "symmetry_check"]
     p.add_argument(
         "--refine",
@@ -122,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
         "symmetry_check": args.symmetry_check,
         "viewpoints": args.viewpoints,
         "up": args.up,
+        "with_fpfh": args.with_fpfh,
     }
     options = registration_options(config, flags, descriptor)
     record = run_record("register", used_config(options, section), descriptor)

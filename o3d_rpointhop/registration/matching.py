@@ -19,6 +19,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from .._utils.params import Interval, Options, StrOptions
+from ..descriptors import FPFHTransformer
 from ..descriptors.pointhop import N_TURNS_ALLOWED
 from .correspondences import (
     Correspondences,
@@ -355,6 +356,39 @@ class PooledMatcher(BaseEstimator):
             if not isinstance(matcher, Matcher):
                 raise ValueError(f"PooledMatcher: part {name!r}'s matcher is not a Matcher")
             matcher.validate()
+
+    @classmethod
+    def with_fpfh(
+        cls, matcher: Matcher | None = None, combine: str = "hypotheses"
+    ) -> PooledMatcher:
+        """The step's own descriptor's matches beside FPFH's: the pooled hypotheses of
+        docs/low_overlap.md ("Pooled hypotheses") with the defaults.
+
+        Parameters
+        ----------
+        matcher : Matcher, default=None
+            The own descriptor's matcher (the part named ``"model"``); ``None``:
+            nearest descriptors both ways, at most 4000 matches (the consensus's
+            default).
+        combine : {"matches", "hypotheses"}, default="hypotheses"
+            As :class:`PooledMatcher` takes it.
+
+        Returns
+        -------
+        PooledMatcher
+            Parts ``"model"`` and ``"fpfh"`` (:class:`~o3d_rpointhop.FPFHTransformer`
+            with its defaults, nearest both ways, at most 4000 matches).
+
+        Examples
+        --------
+        >>> from o3d_rpointhop import ConsensusGlobal, PooledMatcher
+        >>> step = ConsensusGlobal(matcher=PooledMatcher.with_fpfh())
+        >>> [name for name, _, _ in step.matcher.parts]
+        ['model', 'fpfh']
+        """
+        own = Matcher(both_directions=True, max_matches=4000) if matcher is None else matcher
+        fpfh = Matcher(both_directions=True, max_matches=4000)
+        return cls([("model", None, own), ("fpfh", FPFHTransformer(), fpfh)], combine=combine)
 
     def descriptors(self, own: Any) -> list[tuple[Any, Matcher]]:
         """Each part's descriptor (``own`` for ``None``) and matcher, in order."""

@@ -238,3 +238,45 @@ def test_describe_and_fit_take_a_config_and_record_their_runs(tmp_path, capsys):
     assert main(["describe", clouds[0], "-o", str(out), "--model", str(model)]) == 0
     record = json.loads((tmp_path / "d.npy.json").read_text())["provenance"]
     assert record["descriptor"]["model"] == "fitted"
+
+
+def test_with_fpfh_runs_the_pooled_hypotheses_and_a_config_repeats_it(tmp_path, capsys, pair):
+    """``--with-fpfh`` gives register() the consensus with FPFH's matches beside the
+    model's (the library's ``PooledMatcher.with_fpfh``): the same estimate as the
+    library's; the record says ``with_fpfh`` and its config repeats the run; a step that
+    is not the consensus, or a value that is not a bool, is refused by name."""
+    from o3d_rpointhop import ConsensusGlobal, PooledMatcher
+    from o3d_rpointhop.cli import EXIT_USAGE
+
+    source, target, files = pair
+    out = _run(capsys, [*files, "--model", "scene", "--with-fpfh", "--viewpoints", "none"])
+    (step,) = [s for s in out["steps"] if s["name"] == "global"]
+    assert set(step["info"]["hypothesis_parts"]) <= {"model", "fpfh"}
+    assert step["info"]["hypothesis_parts"]  # only the pooled step names parts
+    config = out["provenance"]["config"]
+    assert config["register"]["with_fpfh"] is True
+    assert config["consensus.matcher"]["max_matches"] == 4000
+    library = register(
+        source,
+        target,
+        "scene",
+        global_method=ConsensusGlobal(matcher=PooledMatcher.with_fpfh()),
+        viewpoints=None,
+    )
+    np.testing.assert_allclose(out["transformation"], library.transformation, atol=1e-12)
+    (tmp_path / "out.json").write_text(json.dumps(out))
+    assert (
+        main(["config", "--from", str(tmp_path / "out.json"), "-o", str(tmp_path / "c.toml")]) == 0
+    )
+    assert "with_fpfh = true" in (tmp_path / "c.toml").read_text()
+    again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
+    assert again["transformation"] == out["transformation"]
+    plain = _run(capsys, [*files, "--model", "scene", "--viewpoints", "none"])
+    assert plain["provenance"]["config"]["register"]["with_fpfh"] is False
+    assert "hypothesis_parts" not in [s for s in plain["steps"] if s["name"] == "global"][0]["info"]
+    for extra, message in (
+        (["--model", "scene", "--global", "ransac", "--with-fpfh"], "got ransac"),
+        (["--model", "scene", "--set", "register.with_fpfh=1"], "true or false"),
+    ):
+        assert main(["register", *files, *extra]) == EXIT_USAGE
+        assert message in capsys.readouterr().err
