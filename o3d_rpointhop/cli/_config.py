@@ -202,6 +202,7 @@ def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
     with its matches beside FPFH's, one consensus each, every hypothesis verified
     together (docs/low_overlap.md). Left as it is while the model is still to be chosen
     (``descriptor`` None, ``global_method`` "auto"): the call after the choice decides."""
+    from ..descriptors import FPFHTransformer
     from ..registration import ConsensusGlobal, PooledMatcher
 
     value = register["with_fpfh"]
@@ -209,6 +210,8 @@ def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
         raise UsageError(f"[register] with_fpfh must be true or false, got {value!r}")
     if not value or (descriptor is None and register["global_method"] == "auto"):
         return step
+    if isinstance(descriptor, FPFHTransformer):
+        raise UsageError("--with-fpfh adds FPFH beside R-PointHop; --descriptor fpfh has it")
     if not isinstance(step, ConsensusGlobal):
         name = "none" if step is None else type(step).name
         raise UsageError(

@@ -277,6 +277,7 @@ def test_with_fpfh_runs_the_pooled_hypotheses_and_a_config_repeats_it(tmp_path, 
     for extra, message in (
         (["--model", "scene", "--global", "ransac", "--with-fpfh"], "got ransac"),
         (["--model", "scene", "--set", "register.with_fpfh=1"], "true or false"),
+        (["--descriptor", "fpfh", "--global", "consensus", "--with-fpfh"], "has it"),
     ):
         assert main(["register", *files, *extra]) == EXIT_USAGE
         assert message in capsys.readouterr().err
