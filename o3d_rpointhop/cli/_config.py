@@ -28,7 +28,7 @@ __all__ = [
     "step_classes",
     "settings_section",
     "to_toml",
-    "recorded_matcher",
+    "own_matcher",
     "with_fpfh",
 ]
 
@@ -218,11 +218,10 @@ def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
             f"--with-fpfh needs the consensus as the global step, got {name} (--global "
             "consensus; the scene model's default is the consensus)"
         )
-    matcher = step.matcher if step.matcher is not None else step.default_matcher()
-    return step.set_params(matcher=PooledMatcher.with_fpfh(matcher))
+    return step.set_params(matcher=PooledMatcher.with_fpfh(own_matcher(step)[1]))
 
 
-def recorded_matcher(step: Any) -> tuple[bool, Any]:
+def own_matcher(step: Any) -> tuple[bool, Any]:
     """A global step's matcher as a config records it: whether FPFH's matches are
     beside it (``with_fpfh``), and the matcher of the step's own descriptor."""
     from ..registration import PooledMatcher

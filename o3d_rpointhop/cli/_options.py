@@ -159,7 +159,7 @@ def used_config(
     section with every parameter, every setting, and ``[descriptor]`` (and ``[fpfh]``)
     as given. ``extra``: further sections (``[multiway]``)."""
     from ..registration import SymmetryCheck
-    from ._config import recorded_matcher
+    from ._config import own_matcher
 
     config: dict[str, dict[str, Any]] = {}
     register: dict[str, Any] = {
@@ -178,7 +178,7 @@ def used_config(
         register["global_method"], config_params = _section_of(step)
         config[register["global_method"]] = config_params
         if "matcher" in step.get_params(deep=False):
-            register["with_fpfh"], matcher = recorded_matcher(step)
+            register["with_fpfh"], matcher = own_matcher(step)
             config[f"{register['global_method']}.matcher"] = matcher.get_params()
     if "refine" in options:
         chain = list(options["refine"] or [])

@@ -173,15 +173,11 @@ def pooled_step(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
     most ``fpfh``, its histograms on at most ``fpfh_max_nn`` neighbours), both nearest
     both ways."""
     return ConsensusGlobal(
-        matcher=PooledMatcher(
-            [
-                ("model", None, Matcher(both_directions=True, max_matches=model)),
-                (
-                    "fpfh",
-                    FPFHTransformer(max_nn=fpfh_max_nn),
-                    Matcher(both_directions=True, max_matches=fpfh),
-                ),
-            ]
+        matcher=PooledMatcher.with_fpfh(
+            Matcher(both_directions=True, max_matches=model),
+            FPFHTransformer(max_nn=fpfh_max_nn),
+            Matcher(both_directions=True, max_matches=fpfh),
+            combine="matches",
         )
     )
 
@@ -193,14 +189,10 @@ def pooled_hypotheses_step(
     alone) and one on FPFH's (its histograms on at most ``fpfh_max_nn`` neighbours, at
     most ``fpfh_matches``), every hypothesis of both verified together (``n_hypotheses``
     of each)."""
-    fpfh = FPFHTransformer(max_nn=fpfh_max_nn)
     return ConsensusGlobal(
-        matcher=PooledMatcher(
-            [
-                ("model", None, Matcher(both_directions=True, max_matches=4000)),
-                ("fpfh", fpfh, Matcher(both_directions=True, max_matches=fpfh_matches)),
-            ],
-            combine="hypotheses",
+        matcher=PooledMatcher.with_fpfh(
+            fpfh=FPFHTransformer(max_nn=fpfh_max_nn),
+            fpfh_matcher=Matcher(both_directions=True, max_matches=fpfh_matches),
         ),
         n_hypotheses=n_hypotheses,
     )

@@ -359,7 +359,11 @@ class PooledMatcher(BaseEstimator):
 
     @classmethod
     def with_fpfh(
-        cls, matcher: Matcher | None = None, combine: str = "hypotheses"
+        cls,
+        matcher: Matcher | None = None,
+        fpfh: Any = None,
+        fpfh_matcher: Matcher | None = None,
+        combine: str = "hypotheses",
     ) -> PooledMatcher:
         """The step's own descriptor's matches beside FPFH's: the pooled hypotheses of
         docs/low_overlap.md ("Pooled hypotheses") with the defaults.
@@ -370,14 +374,17 @@ class PooledMatcher(BaseEstimator):
             The own descriptor's matcher (the part named ``"model"``); ``None``:
             nearest descriptors both ways, at most 4000 matches (the consensus's
             default).
+        fpfh : FPFHTransformer, default=None
+            FPFH's descriptor (the part named ``"fpfh"``); ``None``: its defaults.
+        fpfh_matcher : Matcher, default=None
+            FPFH's matcher; ``None``: nearest both ways, at most 4000 matches.
         combine : {"matches", "hypotheses"}, default="hypotheses"
             As :class:`PooledMatcher` takes it.
 
         Returns
         -------
         PooledMatcher
-            Parts ``"model"`` and ``"fpfh"`` (:class:`~o3d_rpointhop.FPFHTransformer`
-            with its defaults, nearest both ways, at most 4000 matches).
+            Parts ``"model"`` and ``"fpfh"``.
 
         Examples
         --------
@@ -387,8 +394,10 @@ class PooledMatcher(BaseEstimator):
         ['model', 'fpfh']
         """
         own = Matcher(both_directions=True, max_matches=4000) if matcher is None else matcher
-        fpfh = Matcher(both_directions=True, max_matches=4000)
-        return cls([("model", None, own), ("fpfh", FPFHTransformer(), fpfh)], combine=combine)
+        if fpfh_matcher is None:
+            fpfh_matcher = Matcher(both_directions=True, max_matches=4000)
+        fpfh = FPFHTransformer() if fpfh is None else fpfh
+        return cls([("model", None, own), ("fpfh", fpfh, fpfh_matcher)], combine=combine)
 
     def descriptors(self, own: Any) -> list[tuple[Any, Matcher]]:
         """Each part's descriptor (``own`` for ``None``) and matcher, in order."""
