@@ -183,16 +183,21 @@ def pooled_step(model: int, fpfh: int, fpfh_max_nn: int) -> ConsensusGlobal:
 
 
 def pooled_hypotheses_step(
-    n_hypotheses: int | str = "auto", fpfh_max_nn: int = 100, fpfh_matches: int = 4000
+    n_hypotheses: int | str = "auto",
+    fpfh_max_nn: int = 100,
+    fpfh_matches: int = 4000,
+    combine: str = "hypotheses",
 ) -> ConsensusGlobal:
     """One consensus on the model's matches (nearest both ways, at most 4000, as it runs
     alone) and one on FPFH's (its histograms on at most ``fpfh_max_nn`` neighbours, at
     most ``fpfh_matches``), every hypothesis of both verified together (``n_hypotheses``
-    of each)."""
+    of each); with ``combine="fallback"`` FPFH's only when the model's estimate is
+    weak."""
     return ConsensusGlobal(
         matcher=PooledMatcher.with_fpfh(
             fpfh=FPFHTransformer(max_nn=fpfh_max_nn),
             fpfh_matcher=Matcher(both_directions=True, max_matches=fpfh_matches),
+            combine=combine,
         ),
         n_hypotheses=n_hypotheses,
     )
@@ -461,6 +466,15 @@ METHODS = _methods(
             ("-8", "", "8", (8,)),
             ("-8-2000-nn50", " (at most 2000, 50 neighbours)", "8", (8, 50, 2000)),
         )
+    ),
+    Method(
+        "rpointhop-scene-fpfh-fallback",
+        "R-PointHop, shipped scene model: its consensus alone, and when its estimate "
+        "explains under 1 % of its matches one on FPFH's too, 16 (auto) hypotheses of "
+        "each verified together + point-to-plane ICP",
+        _register_with(global_method=pooled_hypotheses_step(combine="fallback")),
+        datasets=_SCENES,
+        model="scene",
     ),
     Method(
         "rpointhop-scene-fpfh",

@@ -31,6 +31,7 @@ from .correspondences import (
     turned_correspondences,
     unit_rows,
 )
+from .defaults import TRUST_SUPPORT
 
 __all__ = ["Matcher", "PooledMatcher"]
 
@@ -297,14 +298,29 @@ class PooledMatcher(BaseEstimator):
     the first part's best hypothesis is the step's own choice, which another replaces
     only when it scores 30 % higher (docs/low_overlap.md, "Pooled hypotheses").
 
+    With ``combine="fallback"`` the first part runs alone, as without the others, and
+    the others are asked only when its estimate explains less than ``min_support`` of
+    its matches (the pose its matches barely single out, the result the command line
+    would not trust): then their consensus runs too and every hypothesis is verified
+    together, as with ``"hypotheses"``. Pairs that overlap well pay for one
+    descriptor; the ones that overlap little get the second (docs/low_overlap.md,
+    "FPFH as a fallback").
+
     Parameters
     ----------
     parts : list of (str, transformer or None, Matcher)
         Each part's name, descriptor (``None``: the step's own, else the pipeline's)
         and matcher. Names are distinct; two parts may share a descriptor.
-    combine : {"matches", "hypotheses"}, default="matches"
-        What is pooled: the parts' matches, for one consensus (any global step), or
-        the hypotheses of one consensus per part (:class:`~o3d_rpointhop.ConsensusGlobal`).
+    combine : {"matches", "hypotheses", "fallback"}, default="matches"
+        What is pooled: the parts' matches, for one consensus (any global step), the
+        hypotheses of one consensus per part (:class:`~o3d_rpointhop.ConsensusGlobal`),
+        or those hypotheses only when the first part's own estimate is weak (also the
+        consensus only).
+    min_support : float, default=0.01
+        With ``combine="fallback"``: the least share of the first part's matches its
+        estimate must explain (within the step's inlier distance) for the others not
+        to be asked; the command line's trust threshold
+        (:data:`~o3d_rpointhop.registration.defaults.TRUST_SUPPORT`).
 
     Examples
     --------
@@ -319,9 +335,12 @@ class PooledMatcher(BaseEstimator):
     >>> step = ConsensusGlobal(matcher=pooled)
     """
 
-    def __init__(self, parts: list, combine: str = "matches") -> None:
+    def __init__(
+        self, parts: list, combine: str = "matches", min_support: float = TRUST_SUPPORT
+    ) -> None:
         self.parts = parts
         self.combine = combine
+        self.min_support = min_support
 
     def validate(self) -> None:
         """Check the parts and each part's matcher.
@@ -333,10 +352,14 @@ class PooledMatcher(BaseEstimator):
         """
         if not isinstance(self.parts, (list, tuple)) or not self.parts:
             raise ValueError(f"PooledMatcher: parts must be a non-empty list, got {self.parts!r}")
-        if self.combine not in ("matches", "hypotheses"):
+        if self.combine not in ("matches", "hypotheses", "fallback"):
             raise ValueError(
-                f"PooledMatcher: combine must be 'matches' or 'hypotheses', got {self.combine!r}"
+                "PooledMatcher: combine must be 'matches', 'hypotheses' or 'fallback', "
+                f"got {self.combine!r}"
             )
+        support = self.min_support
+        if isinstance(support, bool) or not isinstance(support, Real) or not 0 <= support <= 1:
+            raise ValueError(f"PooledMatcher: min_support must be in [0, 1], got {support!r}")
         names = set()
         for part in self.parts:
             if not (isinstance(part, tuple) and len(part) == 3):
@@ -378,7 +401,7 @@ class PooledMatcher(BaseEstimator):
             FPFH's descriptor (the part named ``"fpfh"``); ``None``: its defaults.
         fpfh_matcher : Matcher, default=None
             FPFH's matcher; ``None``: nearest both ways, at most 4000 matches.
-        combine : {"matches", "hypotheses"}, default="hypotheses"
+        combine : {"matches", "hypotheses", "fallback"}, default="hypotheses"
             As :class:`PooledMatcher` takes it.
 
         Returns

@@ -116,7 +116,7 @@ class GlobalStep(RegistrationStep):
         return tuple((descriptor, matcher.frame_turns) for descriptor, matcher in self._parts())
 
     #: Whether the step can run once per part of a matcher that pools hypotheses
-    #: (``PooledMatcher(..., combine="hypotheses")``).
+    #: (``PooledMatcher(..., combine="hypotheses")`` or ``"fallback"``).
     pools_hypotheses = False
 
     def _check_params(self) -> None:
@@ -125,19 +125,22 @@ class GlobalStep(RegistrationStep):
         if self._pooled_hypotheses() and not self.pools_hypotheses:
             raise ValueError(
                 f"{type(self).__name__} pools matches only: a PooledMatcher with "
-                "combine='hypotheses' needs ConsensusGlobal"
+                f"combine={matcher.combine!r} needs ConsensusGlobal"
             )
 
     def _pooled_hypotheses(self) -> bool:
-        """Whether the matcher pools the hypotheses of one run per part."""
+        """Whether the matcher pools the hypotheses of one run per part (always, or as
+        a fallback)."""
         matcher = self._matcher()
-        return isinstance(matcher, PooledMatcher) and matcher.combine == "hypotheses"
+        return isinstance(matcher, PooledMatcher) and matcher.combine != "matches"
 
-    def _part_matches(self, context: RegistrationContext) -> list[Correspondences]:
-        """Each part's matches (source index, target index): its matcher on both
-        clouds' descriptors as it compares them (under every turn, ``(frame_turns, n,
-        width)``, or plain; scaled to unit length for the cosine metric: the context
-        computes and scales them once per registration)."""
+    def _part_matches(
+        self, context: RegistrationContext, parts: slice = slice(None)
+    ) -> list[Correspondences]:
+        """Each part's matches (source index, target index), of the parts ``parts``
+        selects: its matcher on both clouds' descriptors as it compares them (under
+        every turn, ``(frame_turns, n, width)``, or plain; scaled to unit length for the
+        cosine metric: the context computes and scales them once per registration)."""
         return [
             matcher._match(
                 *(
@@ -146,7 +149,7 @@ class GlobalStep(RegistrationStep):
                 ),
                 who=type(self).__name__,
             )
-            for descriptor, matcher in self._parts()
+            for descriptor, matcher in self._parts()[parts]
         ]
 
     def _matches(self, context: RegistrationContext) -> Correspondences:

@@ -144,11 +144,25 @@ class ConsensusGlobal(GlobalStep):
         distance = self.max_correspondence_distance or context.settings.ransac_distance
         info = {}
         if self._pooled_hypotheses():
-            parts = self._part_matches(context)
-            runs = [self._consensus(context, corr, distance) for corr in parts]
+            matcher = self._matcher()
+            parts = self._part_matches(context, slice(1))
+            runs = [self._consensus(context, parts[0], distance)]
+            if matcher.combine == "fallback":
+                # The first part alone, kept when its estimate explains enough of its
+                # matches; else the others are asked too.
+                first = self._result_of(
+                    context, runs[0], distance, parts[0], hypotheses=runs[0].n_hypotheses
+                )
+                if np.mean(first.match_inliers) >= matcher.min_support:
+                    first.info["fallback"] = False
+                    return first
+                info["fallback"] = True
+            more = self._part_matches(context, slice(1, None))
+            runs += [self._consensus(context, corr, distance) for corr in more]
+            parts += more
             found, corr = pooled(runs), PooledMatcher.pool(parts)
             # Which part each verified hypothesis came from, in their order.
-            names = [name for name, _, _ in self._matcher().parts]
+            names = [name for name, _, _ in matcher.parts]
             info["hypothesis_parts"] = [
                 n for n, r in zip(names, runs, strict=True) for _ in r.hypotheses
             ]
