@@ -228,6 +228,57 @@ def test_pooled_hypotheses_let_the_part_that_sees_the_pose_win():
     assert not np.allclose(wrong.transformation, truth, atol=0.05)
 
 
+class _Unasked(_Noise):
+    """A descriptor that must not be computed."""
+
+    def transform(self, X):
+        raise AssertionError("the fallback part was described though the first sufficed")
+
+
+def test_the_fallback_asks_the_second_part_only_when_the_first_is_weak():
+    """``combine="fallback"``: a first part whose estimate explains its matches is the
+    step alone (the second part never described); one whose matches are noise hands
+    over to the pooled hypotheses, with the same pose as ``combine="hypotheses"``."""
+    from helpers import assert_close_pose, moved_copy
+
+    from o3d_rpointhop.datasets import make_object
+
+    target = make_object(2500, shape_seed=3, sample_seed=1)
+    source, truth = moved_copy(target, seed=2)
+
+    def run(parts, combine, **params):
+        matcher = PooledMatcher(parts, combine=combine, **params)
+        step = ConsensusGlobal(matcher=matcher, n_hypotheses=3)
+        return register(source, target, FPFHTransformer(), global_method=step)
+
+    strong = [("fpfh", None, _both(300)), ("later", _Unasked(), _both(300))]
+    kept = run(strong, "fallback")
+    alone = register(
+        source,
+        target,
+        FPFHTransformer(),
+        global_method=ConsensusGlobal(matcher=_both(300), n_hypotheses=3),
+    )
+    np.testing.assert_array_equal(kept.transformation, alone.transformation)
+    assert kept.steps[0].info["fallback"] is False
+    assert kept.support >= 0.01 and "hypothesis_parts" not in kept.steps[0].info
+    with pytest.raises(AssertionError, match="fallback part was described"):
+        run(strong, "fallback", min_support=1.0)  # nothing explains every match
+
+    weak = [("noise", _Noise(), _both(300)), ("fpfh", FPFHTransformer(), _both(300))]
+    rescued = run(weak, "fallback")
+    assert_close_pose(rescued.transformation, truth, 2.0, 0.02)
+    info = rescued.steps[0].info
+    assert info["fallback"] is True and info["hypothesis_parts"][0] == "noise"
+    np.testing.assert_array_equal(rescued.transformation, run(weak, "hypotheses").transformation)
+
+
+@pytest.mark.parametrize("support", [-0.1, 1.5, True, "high"])
+def test_min_support_is_a_share(support):
+    with pytest.raises(ValueError, match="min_support must be in"):
+        PooledMatcher([("a", None, _both(10))], min_support=support).validate()
+
+
 @pytest.mark.parametrize("step", [RANSACGlobal, FGRGlobal, SVDGlobal])
 def test_only_the_consensus_pools_hypotheses(step):
     pooled = PooledMatcher([("a", None, _both(10))], combine="hypotheses")

@@ -113,7 +113,13 @@ class GlobalStep(RegistrationStep):
         return [(self.descriptor, matcher)]
 
     def _descriptors(self) -> tuple:
-        return tuple((descriptor, matcher.frame_turns) for descriptor, matcher in self._parts())
+        """The descriptors prepared before the steps run: every part's, but a fallback's
+        first only (the others are described when asked)."""
+        parts = self._parts()
+        matcher = self._matcher()
+        if isinstance(matcher, PooledMatcher) and matcher.combine == "fallback":
+            parts = parts[:1]
+        return tuple((descriptor, matcher.frame_turns) for descriptor, matcher in parts)
 
     #: Whether the step can run once per part of a matcher that pools hypotheses
     #: (``PooledMatcher(..., combine="hypotheses")`` or ``"fallback"``).
