@@ -34,7 +34,9 @@ __all__ = [
 
 #: ``[register]``: the arguments of ``register()`` (``register_multiway()`` takes all
 #: but the refinement) the command line also has as flags, and ``with_fpfh``: the
-#: consensus's matches beside FPFH's (:meth:`PooledMatcher.with_fpfh`).
+#: consensus's matches beside FPFH's (:meth:`PooledMatcher.with_fpfh`): ``true``
+#: always, ``"fallback"`` when the model's estimate is weak, ``false`` never, ``"auto"``
+#: as ``register()`` chooses (the fallback for the scene model with the sensors known).
 REGISTER_KEYS = {
     "global_method": "auto",
     "refine": "point_to_plane",
@@ -44,7 +46,7 @@ REGISTER_KEYS = {
     "symmetry_check": False,
     "viewpoints": "auto",
     "up": None,
-    "with_fpfh": False,
+    "with_fpfh": "auto",
 }
 #: ``[descriptor]``: which descriptor a command describes with (``model``: a shipped
 #: model's name or a model file; unset: the command's default) and on how many axes and
@@ -198,17 +200,25 @@ def estimator_section(estimator: Any) -> dict[str, Any]:
 
 
 def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
-    """The global ``step`` as ``[register] with_fpfh`` makes it: when true, the consensus
+    """The global ``step`` as ``[register] with_fpfh`` makes it: ``true``, the consensus
     with its matches beside FPFH's, one consensus each, every hypothesis verified
-    together (docs/low_overlap.md). Left as it is while the model is still to be chosen
-    (``descriptor`` None, ``global_method`` "auto"): the call after the choice decides."""
+    together (docs/low_overlap.md); ``"fallback"``, FPFH's only when the model's own
+    estimate is weak; ``false``, the model's alone; ``"auto"``, as ``register()``
+    builds it. Left as it is while the model is still to be chosen (``descriptor``
+    None, ``global_method`` "auto"): the call after the choice decides."""
     from ..descriptors import FPFHTransformer
     from ..registration import ConsensusGlobal, PooledMatcher
 
     value = register["with_fpfh"]
-    if not isinstance(value, bool):
-        raise UsageError(f"[register] with_fpfh must be true or false, got {value!r}")
-    if not value or (descriptor is None and register["global_method"] == "auto"):
+    if not any(value is v for v in (True, False)) and value not in ("fallback", "auto"):
+        raise UsageError(
+            f"[register] with_fpfh must be true, false, 'fallback' or 'auto', got {value!r}"
+        )
+    if value == "auto" or (descriptor is None and register["global_method"] == "auto"):
+        return step
+    if value is False:
+        if isinstance(step, ConsensusGlobal) and own_matcher(step)[0]:
+            return step.set_params(matcher=own_matcher(step)[1])
         return step
     if isinstance(descriptor, FPFHTransformer):
         raise UsageError("--with-fpfh adds FPFH beside R-PointHop; --descriptor fpfh has it")
@@ -218,15 +228,17 @@ def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
             f"--with-fpfh needs the consensus as the global step, got {name} (--global "
             "consensus; the scene model's default is the consensus)"
         )
-    return step.set_params(matcher=PooledMatcher.with_fpfh(own_matcher(step)[1]))
+    combine = "hypotheses" if value is True else "fallback"
+    return step.set_params(matcher=PooledMatcher.with_fpfh(own_matcher(step)[1], combine=combine))
 
 
-def own_matcher(step: Any) -> tuple[bool, Any]:
+def own_matcher(step: Any) -> tuple[bool | str, Any]:
     """A global step's matcher as a config records it: whether FPFH's matches are
-    beside it (``with_fpfh``), and the matcher of the step's own descriptor."""
+    beside it (``with_fpfh``: true, ``"fallback"`` or false), and the matcher of the
+    step's own descriptor."""
     from ..registration import PooledMatcher
 
     matcher = step.matcher if step.matcher is not None else step.default_matcher()
     if isinstance(matcher, PooledMatcher):
-        return True, matcher.parts[0][2]
+        return "fallback" if matcher.combine == "fallback" else True, matcher.parts[0][2]
     return False, matcher

@@ -4,14 +4,12 @@ arguments are (:func:`used_config`)."""
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 from ._common import UsageError
 from ._config import OBJECT_PARAMETERS, REGISTER_KEYS, settings_section, step_classes, with_fpfh
 
 __all__ = [
-    "add_edge_limits",
     "multiway_options",
     "reconstruct_options",
     "registration_options",
@@ -42,12 +40,14 @@ def registration_options(
             raise UsageError("--symmetry-check needs an ICP refinement (--refine)")
         names.append("symmetry_check")
     global_method = register["global_method"]
+    views = _viewpoints(register["viewpoints"], descriptor)
     try:
         chain = build_chain(
             None if global_method == "none" else global_method,
             names,
             descriptor,
             _with_matchers(config),
+            None if views == "auto" else views,
         )
     except (ValueError, TypeError) as exc:
         raise UsageError(f"[register]: {exc}") from None
@@ -71,7 +71,7 @@ def registration_options(
         "n_global_points": register["n_global_points"],
         "random_state": register["random_state"],
         "settings": settings,
-        "viewpoints": _viewpoints(register["viewpoints"], descriptor),
+        "viewpoints": views,
         "up": register["up"],
     }
 
@@ -116,7 +116,10 @@ def multiway_options(
     ``[multiway]``'s edge threshold and ``[settings]``. Multiway refines with
     point-to-plane ICP (the pose graph needs its information matrices), so a refinement
     other than that is refused."""
-    options = registration_options(config, {**flags, "symmetry_check": False}, descriptor)
+    # The pairs are screened with FPFH only when told ("auto": the model's matches alone).
+    told = config.get("register", {}).get("with_fpfh", "auto")
+    flags = {**flags, "symmetry_check": False, "with_fpfh": False if told == "auto" else told}
+    options = registration_options(config, flags, descriptor)
     if options.pop("up") is not None:
         raise UsageError("reconstruct takes no up direction ([register] up)")
     refine = options.pop("refine") or []
@@ -215,34 +218,3 @@ def reconstruct_options(
     edges = {"min_fitness": options["min_fitness"], "max_violation": limit}
     used = used_config(options, section, {"multiway": edges})
     return options, run_record("reconstruct", used, descriptor)
-
-
-def _share_or_none(text: str) -> float | str:
-    """``--max-violation``: a share in [0, 1], or ``none``."""
-    if text == "none":
-        return text
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a share in [0, 1] or 'none', got {text!r}")
-    return value
-
-
-def add_edge_limits(parser: argparse.ArgumentParser) -> None:
-    """``--min-fitness`` and ``--max-violation``: what a screened pair needs to become
-    an edge of the pose graph."""
-    parser.add_argument(
-        "--min-fitness",
-        type=float,
-        help="share of a scan within 1.5 resolutions of the other for a pair to become an "
-        "edge (default 0.3; [multiway] min_fitness)",
-    )
-    parser.add_argument(
-        "--max-violation",
-        type=_share_or_none,
-        help="with the sensors known, the largest share of either scan a pair's pose may put "
-        "in space the other sensor saw empty, for the pair to become an edge, or 'none' "
-        "(default 0.1; [multiway] max_violation)",
-    )

@@ -26,7 +26,8 @@ from ._common import (
 )
 from ._config import load_config
 from ._descriptor import chosen_descriptor, descriptor_from
-from ._options import add_edge_limits, reconstruct_options
+from ._edge_flags import add_edge_limits
+from ._options import reconstruct_options
 from ._paths import scan_paths
 from ._trust import log
 from .view import add_view

@@ -60,11 +60,14 @@ def add_parser(commands) -> None:
     )
     p.add_argument(
         "--with-fpfh",
-        action="store_true",
+        nargs="?",
+        const="always",
+        choices=["always", "fallback", "never"],
         default=None,
         help="the consensus on FPFH's matches too, every hypothesis of both verified "
-        "together: more pairs that overlap little, about twice the time "
-        "(docs/low_overlap.md, 'Pooled hypotheses')",
+        "together: always (more pairs that overlap little, about twice the time), "
+        "fallback (only where the model's estimate explains under 1%% of its matches: "
+        "the default for --model scene with sensors), or never (docs/low_overlap.md)",
     )
     refinements = [name for name in REFINE_METHODS if name != "symmetry_check"]
     p.add_argument(
@@ -130,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         "symmetry_check": args.symmetry_check,
         "viewpoints": args.viewpoints,
         "up": args.up,
-        "with_fpfh": args.with_fpfh,
+        "with_fpfh": {"always": True, "never": False}.get(args.with_fpfh, args.with_fpfh),
     }
     options = registration_options(config, flags, descriptor)
     record = run_record("register", used_config(options, section), descriptor)

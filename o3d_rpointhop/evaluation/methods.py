@@ -429,8 +429,9 @@ METHODS = _methods(
     ),
     Method(
         "rpointhop-scene-own-matches",
-        "R-PointHop, shipped scene model, consensus on the model's own matches (at most "
-        "4000, the default before FPFH's were pooled) + point-to-plane ICP",
+        "R-PointHop, shipped scene model, consensus on the model's own matches alone (at "
+        "most 4000; global_method='consensus', the default before FPFH was asked as a "
+        "fallback) + point-to-plane ICP",
         _register_with(global_method="consensus"),
         datasets=_SCENES,
         model="scene",

@@ -11,6 +11,7 @@ __all__ = [
     "DEFAULT_MODEL",
     "DEFAULT_GLOBAL_METHOD",
     "DEFAULT_GLOBAL_POINTS",
+    "FPFH_FALLBACK",
     "SCENE_FPFH_WEIGHT",
     "TRUST_SUPPORT",
     "default_descriptor",
@@ -44,6 +45,17 @@ DEFAULT_GLOBAL_POINTS = 2048
 #: wins (FPFH on the training scenes of 3DMatch: 77.0 / 26.3 % against 83.6 / 43.9 %),
 #: so scene models state it and FPFH on scenes takes ``global_method="consensus"``.
 DEFAULT_GLOBAL_METHOD = "ransac"
+
+#: Whether ``register()``'s consensus, where a model states it (``global_method="auto"``)
+#: and the sensors are known, asks FPFH too when the model's estimate explains under
+#: :data:`TRUST_SUPPORT` of its matches (``PooledMatcher(combine="fallback")``: FPFH's
+#: consensus beside the model's, every hypothesis verified together). Chosen on every
+#: official pair of the scene model's four training scenes
+#: (``scene_fpfh_fallback_training.*``): 3DMatch 117 / 121 and 3DLoMatch 163 / 195
+#: registered against the model alone's 114 and 156 (FPFH's consensus always asked:
+#: 117 and 163 at twice the time), with FPFH described for a fifth of the pairs
+#: (docs/low_overlap.md, "FPFH as a fallback").
+FPFH_FALLBACK = True
 
 #: FPFH's weight beside R-PointHop in a :class:`~o3d_rpointhop.DescriptorUnion` (each
 #: part's rows at unit length): chosen for the shipped scene model on every official

@@ -25,8 +25,9 @@ from .._utils.validation import check_rigid_transformation, renamed_seed
 from ..descriptors import PRETRAINED_MODELS
 from .checks import RegistrationWarning
 from .context import RegistrationContext
-from .defaults import default_descriptor, resolve_global_method
+from .defaults import FPFH_FALLBACK, default_descriptor, resolve_global_method
 from .flags import assess, warn_flags
+from .matching import PooledMatcher
 from .model_choice import resolve_model
 from .result import RegistrationResult
 from .scoring import check_pairs, registration_scorer
@@ -415,6 +416,7 @@ def build_chain(
     refine: str | RegistrationStep | list | None = "point_to_plane",
     descriptor: Any = None,
     params: dict[str, dict] | None = None,
+    viewpoints: Any = None,
 ) -> list[tuple[str, RegistrationStep]]:
     """The named steps :func:`register` runs for these arguments, in order.
 
@@ -434,6 +436,10 @@ def build_chain(
         What ``"auto"`` is resolved for.
     params : dict, default=None
         Parameters of the steps given by name, by name (a config file's sections).
+    viewpoints : any, default=None
+        Whether the sensors are known (anything but ``None``): the consensus
+        ``"auto"`` resolves to then asks FPFH's consensus too when the model's estimate
+        is weak (:data:`~o3d_rpointhop.registration.defaults.FPFH_FALLBACK`).
 
     Returns
     -------
@@ -453,7 +459,11 @@ def build_chain(
         what = "the descriptor's registration_global_method_" if stated else "global_method"
         raise ValueError(f"{what} {global_method!r} is not one of {sorted(GLOBAL_METHODS)}")
     if global_method is not None:
-        steps.append(("global", _make_step(global_method, GLOBAL_METHODS, params)))
+        step = _make_step(global_method, GLOBAL_METHODS, params)
+        if stated and global_method == "consensus" and viewpoints is not None and FPFH_FALLBACK:
+            own = step.matcher  # None: the consensus's default, as PooledMatcher takes it
+            step.set_params(matcher=PooledMatcher.with_fpfh(own, combine="fallback"))
+        steps.append(("global", step))
     previous = None
     for i, spec in enumerate(_check_refinements(refine)):
         if isinstance(spec, SymmetryCheck):
@@ -537,9 +547,13 @@ def register(
         the paper's one-shot estimate; ``None`` skips the global step (ICP from
         ``init``). ``"auto"``: the step that won on the descriptor's training data
         (:func:`~o3d_rpointhop.registration.defaults.resolve_global_method`): the
-        consensus for the shipped scene model, which states it; RANSAC for the
-        ModelNet40 model, FPFH and anything that states nothing. For FPFH on indoor
-        scans pass ``"consensus"`` (it wins there; see docs/consensus.md).
+        consensus for the shipped scene model, which states it, and with the sensors
+        known (``viewpoints``) FPFH's consensus beside it for a pair where the model's
+        estimate explains under 1 % of its matches (``PooledMatcher(...,
+        combine="fallback")``, docs/low_overlap.md; ``"consensus"`` is the model
+        alone); RANSAC for the ModelNet40 model, FPFH and anything that states nothing.
+        For FPFH on indoor scans pass ``"consensus"`` (it wins there; see
+        docs/consensus.md).
     refine : {"point_to_plane", "point_to_point", "generalized", "multiscale", \
             "symmetry_check"}, step, list of those, or None, default="point_to_plane"
         Run in order. ``"symmetry_check"`` (:class:`SymmetryCheck`) after an ICP step
@@ -598,7 +612,7 @@ def register(
     descriptor, viewpoints, choice = resolve_model(
         descriptor, viewpoints, [source, target], ["source", "target"]
     )
-    steps = build_chain(global_method, refine, descriptor)
+    steps = build_chain(global_method, refine, descriptor, viewpoints=viewpoints)
     pipeline = RegistrationPipeline(
         steps,
         descriptor=descriptor,

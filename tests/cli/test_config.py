@@ -276,8 +276,37 @@ def test_with_fpfh_runs_the_pooled_hypotheses_and_a_config_repeats_it(tmp_path, 
     assert "hypothesis_parts" not in [s for s in plain["steps"] if s["name"] == "global"][0]["info"]
     for extra, message in (
         (["--model", "scene", "--global", "ransac", "--with-fpfh"], "got ransac"),
-        (["--model", "scene", "--set", "register.with_fpfh=1"], "true or false"),
+        (["--model", "scene", "--set", "register.with_fpfh=1"], "true, false"),
         (["--descriptor", "fpfh", "--global", "consensus", "--with-fpfh"], "has it"),
     ):
         assert main(["register", *files, *extra]) == EXIT_USAGE
         assert message in capsys.readouterr().err
+
+
+def test_the_scene_path_with_sensors_asks_fpfh_as_a_fallback(tmp_path, capsys, pair):
+    """With the scene model and the sensors known, the command line's default global step
+    is register()'s: the consensus with FPFH's as a fallback (``with_fpfh`` recorded as
+    ``"fallback"``, and a config repeats it); ``--with-fpfh never`` is the model's
+    consensus alone, as ``global_method="consensus"`` gives it."""
+    source, target, files = pair
+    scene = ["--model", "scene", "--viewpoints", "origin"]
+    out = _run(capsys, [*files, *scene])
+    (step,) = [s for s in out["steps"] if s["name"] == "global"]
+    assert step["info"]["fallback"] in (True, False)
+    assert out["provenance"]["config"]["register"]["with_fpfh"] == "fallback"
+    library = register(source, target, "scene", viewpoints="origin")
+    np.testing.assert_allclose(out["transformation"], library.transformation, atol=1e-12)
+    (tmp_path / "out.json").write_text(json.dumps(out))
+    assert (
+        main(["config", "--from", str(tmp_path / "out.json"), "-o", str(tmp_path / "c.toml")]) == 0
+    )
+    assert 'with_fpfh = "fallback"' in (tmp_path / "c.toml").read_text()
+    again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
+    assert again["transformation"] == out["transformation"]
+
+    alone = _run(capsys, [*files, *scene, "--with-fpfh", "never"])
+    assert alone["provenance"]["config"]["register"]["with_fpfh"] is False
+    (step,) = [s for s in alone["steps"] if s["name"] == "global"]
+    assert "fallback" not in step["info"]
+    library = register(source, target, "scene", viewpoints="origin", global_method="consensus")
+    np.testing.assert_allclose(alone["transformation"], library.transformation, atol=1e-12)
