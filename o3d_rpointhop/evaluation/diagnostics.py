@@ -182,7 +182,8 @@ def choice_diagnostics(result: Any, truth: np.ndarray) -> dict | None:
     few right matches mean the matches failed) and the share its estimate explains
     (``support``, :attr:`~o3d_rpointhop.RegistrationResult.support`), and, when it
     verified several hypotheses, their scores, which one it chose and its margin (right
-    matches but a wrong pose mean the choice failed). None for a result without a
+    matches but a wrong pose mean the choice failed), and whether a fallback part was
+    asked (``PooledMatcher(combine="fallback")``). None for a result without a
     global step.
 
     Parameters
@@ -203,7 +204,7 @@ def choice_diagnostics(result: Any, truth: np.ndarray) -> dict | None:
             "match_inlier_ratio": float(right.mean()),
             "support": result.support,
         }
-        for key in ("hypothesis_scores", "chosen_hypothesis", "margin"):
+        for key in ("hypothesis_scores", "chosen_hypothesis", "margin", "fallback"):
             if key in step.info:
                 out[key] = step.info[key]
         return out
