@@ -47,7 +47,6 @@ def registration_options(
             names,
             descriptor,
             _with_matchers(config),
-            None if views == "auto" else views,
         )
     except (ValueError, TypeError) as exc:
         raise UsageError(f"[register]: {exc}") from None

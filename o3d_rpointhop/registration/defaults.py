@@ -46,16 +46,17 @@ DEFAULT_GLOBAL_POINTS = 2048
 #: so scene models state it and FPFH on scenes takes ``global_method="consensus"``.
 DEFAULT_GLOBAL_METHOD = "ransac"
 
-#: Whether ``register()``'s consensus, where a model states it (``global_method="auto"``)
-#: and the sensors are known, asks FPFH too when the model's estimate explains under
-#: :data:`TRUST_SUPPORT` of its matches (``PooledMatcher(combine="fallback")``: FPFH's
-#: consensus beside the model's, every hypothesis verified together). Chosen on every
-#: official pair of the scene model's four training scenes
-#: (``scene_fpfh_fallback_training.*``): 3DMatch 117 / 121 and 3DLoMatch 163 / 195
+#: Whether ``register()``'s consensus, where a model states it (``global_method="auto"``),
+#: asks FPFH too when the model's estimate explains under :data:`TRUST_SUPPORT` of its
+#: matches (``PooledMatcher(combine="fallback")``: FPFH's consensus beside the model's,
+#: every hypothesis verified together). Chosen on every official pair of the scene
+#: model's four training scenes: with the sensors known
+#: (``scene_fpfh_fallback_training.*``) 3DMatch 117 / 121 and 3DLoMatch 163 / 195
 #: registered against the model alone's 114 and 156 (3 and 8 gained, 0 and 1 lost;
 #: FPFH's consensus always asked: 117 and 163 at twice the time), at 1.04x / 1.05x the
-#: model alone's median time, FPFH described for a fifth of the pairs
-#: (docs/low_overlap.md, "FPFH as a fallback").
+#: model alone's median time; without them (``..._no_viewpoints.*``) 113 and 121 against
+#: 111 and 99 (2 and 23 gained, 0 and 1 lost) at 1.09x / 1.44x (docs/low_overlap.md,
+#: "FPFH as a fallback").
 FPFH_FALLBACK = True
 
 #: FPFH's weight beside R-PointHop in a :class:`~o3d_rpointhop.DescriptorUnion` (each

@@ -427,8 +427,9 @@ def register_multiway(
     points = [p - c for p, c in zip(points, centres, strict=True)]
     views = [None if v is None else v - c for v, c in zip(views, centres, strict=True)]
     worker = worker_copy(descriptor if descriptor is not None else default_descriptor())
-    # The screening step, resolved and checked as register() does (copied per pair).
-    global_method = build_chain(global_method, None, worker)[0][1]
+    # The screening step, resolved and checked as register() does (copied per pair),
+    # without register()'s FPFH fallback: the rooms were chosen with the model alone.
+    global_method = build_chain(global_method, None, worker, fpfh_fallback=False)[0][1]
     if voxel_size == "auto":
         voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
     else:

@@ -416,7 +416,7 @@ def build_chain(
     refine: str | RegistrationStep | list | None = "point_to_plane",
     descriptor: Any = None,
     params: dict[str, dict] | None = None,
-    viewpoints: Any = None,
+    fpfh_fallback: bool = True,
 ) -> list[tuple[str, RegistrationStep]]:
     """The named steps :func:`register` runs for these arguments, in order.
 
@@ -436,10 +436,11 @@ def build_chain(
         What ``"auto"`` is resolved for.
     params : dict, default=None
         Parameters of the steps given by name, by name (a config file's sections).
-    viewpoints : any, default=None
-        Whether the sensors are known (anything but ``None``): the consensus
-        ``"auto"`` resolves to then asks FPFH's consensus too when the model's estimate
-        is weak (:data:`~o3d_rpointhop.registration.defaults.FPFH_FALLBACK`).
+    fpfh_fallback : bool, default=True
+        Whether the consensus ``"auto"`` resolves to asks FPFH's consensus too where
+        the model's estimate is weak
+        (:data:`~o3d_rpointhop.registration.defaults.FPFH_FALLBACK`); multiway's
+        screening passes False (its pairs were measured with the model alone).
 
     Returns
     -------
@@ -460,7 +461,7 @@ def build_chain(
         raise ValueError(f"{what} {global_method!r} is not one of {sorted(GLOBAL_METHODS)}")
     if global_method is not None:
         step = _make_step(global_method, GLOBAL_METHODS, params)
-        if stated and global_method == "consensus" and viewpoints is not None and FPFH_FALLBACK:
+        if stated and global_method == "consensus" and FPFH_FALLBACK and fpfh_fallback:
             own = step.matcher  # None: the consensus's default, as PooledMatcher takes it
             step.set_params(matcher=PooledMatcher.with_fpfh(own, combine="fallback"))
         steps.append(("global", step))
@@ -547,11 +548,11 @@ def register(
         the paper's one-shot estimate; ``None`` skips the global step (ICP from
         ``init``). ``"auto"``: the step that won on the descriptor's training data
         (:func:`~o3d_rpointhop.registration.defaults.resolve_global_method`): the
-        consensus for the shipped scene model, which states it, and with the sensors
-        known (``viewpoints``) FPFH's consensus beside it for a pair where the model's
-        estimate explains under 1 % of its matches (``PooledMatcher(...,
-        combine="fallback")``, docs/low_overlap.md; ``"consensus"`` is the model
-        alone); RANSAC for the ModelNet40 model, FPFH and anything that states nothing.
+        consensus for the shipped scene model, which states it, with FPFH's consensus
+        beside it for a pair where the model's estimate explains under 1 % of its
+        matches (``PooledMatcher(..., combine="fallback")``, docs/low_overlap.md;
+        ``"consensus"`` is the model alone); RANSAC for the ModelNet40 model, FPFH and
+        anything that states nothing.
         For FPFH on indoor scans pass ``"consensus"`` (it wins there; see
         docs/consensus.md).
     refine : {"point_to_plane", "point_to_point", "generalized", "multiscale", \
@@ -612,7 +613,7 @@ def register(
     descriptor, viewpoints, choice = resolve_model(
         descriptor, viewpoints, [source, target], ["source", "target"]
     )
-    steps = build_chain(global_method, refine, descriptor, viewpoints=viewpoints)
+    steps = build_chain(global_method, refine, descriptor)
     pipeline = RegistrationPipeline(
         steps,
         descriptor=descriptor,

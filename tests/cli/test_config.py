@@ -271,7 +271,9 @@ def test_with_fpfh_runs_the_pooled_hypotheses_and_a_config_repeats_it(tmp_path, 
     assert "with_fpfh = true" in (tmp_path / "c.toml").read_text()
     again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
     assert again["transformation"] == out["transformation"]
-    plain = _run(capsys, [*files, "--model", "scene", "--viewpoints", "none"])
+    plain = _run(
+        capsys, [*files, "--model", "scene", "--viewpoints", "none", "--with-fpfh", "never"]
+    )
     assert plain["provenance"]["config"]["register"]["with_fpfh"] is False
     assert "hypothesis_parts" not in [s for s in plain["steps"] if s["name"] == "global"][0]["info"]
     for extra, message in (
@@ -283,9 +285,9 @@ def test_with_fpfh_runs_the_pooled_hypotheses_and_a_config_repeats_it(tmp_path, 
         assert message in capsys.readouterr().err
 
 
-def test_the_scene_path_with_sensors_asks_fpfh_as_a_fallback(tmp_path, capsys, pair):
-    """With the scene model and the sensors known, the command line's default global step
-    is register()'s: the consensus with FPFH's as a fallback (``with_fpfh`` recorded as
+def test_the_scene_path_asks_fpfh_as_a_fallback(tmp_path, capsys, pair):
+    """With the scene model (here with the sensors known), the command line's default
+    global step is register()'s: the consensus with FPFH's as a fallback (``with_fpfh`` recorded as
     ``"fallback"``, and a config repeats it); ``--with-fpfh never`` is the model's
     consensus alone, as ``global_method="consensus"`` gives it."""
     source, target, files = pair

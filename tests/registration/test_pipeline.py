@@ -176,6 +176,26 @@ def test_build_chain_is_the_one_way_names_become_steps():
         build_chain("magic")
 
 
+def test_the_scene_models_consensus_asks_fpfh_as_a_fallback():
+    """``"auto"`` for a model that states the consensus is the consensus with FPFH as a
+    fallback (``FPFH_FALLBACK``), with the consensus's own matcher first; the consensus
+    named, or multiway's screening (``fpfh_fallback=False``), is the model alone."""
+    from o3d_rpointhop import ConsensusGlobal, PooledMatcher, RPointHopTransformer
+    from o3d_rpointhop.registration.pipeline import build_chain
+
+    scene = RPointHopTransformer.pretrained("scene")
+    step = build_chain("auto", None, scene)[0][1]
+    assert isinstance(step, ConsensusGlobal) and isinstance(step.matcher, PooledMatcher)
+    assert step.matcher.combine == "fallback"
+    assert [name for name, _, _ in step.matcher.parts] == ["model", "fpfh"]
+    assert step.matcher.parts[0][2].get_params() == ConsensusGlobal.default_matcher().get_params()
+    assert build_chain("consensus", None, scene)[0][1].matcher is None
+    assert build_chain("auto", None, scene, fpfh_fallback=False)[0][1].matcher is None
+    assert (
+        build_chain("auto", None, RPointHopTransformer.pretrained("object"))[0][1].name == "ransac"
+    )
+
+
 def test_every_step_has_one_name():
     """A step's ``name`` is its key in the pipeline's tables and its section in a config
     file; a global step run alone reports it."""
