@@ -36,7 +36,7 @@ __all__ = [
 #: but the refinement) the command line also has as flags, and ``with_fpfh``: the
 #: consensus's matches beside FPFH's (:meth:`PooledMatcher.with_fpfh`): ``true``
 #: always, ``"fallback"`` when the model's estimate is weak, ``false`` never, ``"auto"``
-#: as ``register()`` chooses (the fallback for the scene model with the sensors known).
+#: as ``register()`` chooses (the fallback for the scene model).
 REGISTER_KEYS = {
     "global_method": "auto",
     "refine": "point_to_plane",
