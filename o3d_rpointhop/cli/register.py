@@ -202,6 +202,8 @@ def run(args: argparse.Namespace) -> int:
             f"fitness {result.fitness:.3f}, inlier RMSE {result.inlier_rmse:.6g}, "
             f"voxel {result.voxel_size:.6g} ({steps})"
         )
+        if any(s.info.get("fallback") for s in result.steps):
+            print("FPFH's consensus was asked too: the model's estimate explained few matches")
     status = trust_status(result, problems)
     if args.view:
         from ..viewer import show_registration

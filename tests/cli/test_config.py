@@ -312,3 +312,21 @@ def test_the_scene_path_asks_fpfh_as_a_fallback(tmp_path, capsys, pair):
     assert "fallback" not in step["info"]
     library = register(source, target, "scene", viewpoints="origin", global_method="consensus")
     np.testing.assert_allclose(alone["transformation"], library.transformation, atol=1e-12)
+
+
+def test_the_summary_says_when_fpfh_was_asked(tmp_path, capsys):
+    """A room scan against noise: the scene model's estimate explains almost none of its
+    matches, so FPFH's consensus is asked, and the printed summary says so (not for a
+    pair the model alone serves)."""
+    from o3d_rpointhop.datasets import make_room
+
+    room = make_room(4000, random_state=1) + [0.0, 0.0, 2.5]
+    noise = np.random.default_rng(0).uniform(-1, 1, size=(4000, 3)) + [0.0, 0.0, 3.0]
+    twin = make_room(4000, random_state=2)[::-1] * [1, -1, 1] + [0.0, 0.0, 2.5]
+    for name, cloud in (("room", room), ("noise", noise), ("twin", twin)):
+        np.save(tmp_path / f"{name}.npy", cloud)
+    scene = ["--model", "scene", "--viewpoints", "origin"]
+    main(["register", str(tmp_path / "noise.npy"), str(tmp_path / "room.npy"), *scene])
+    assert "FPFH's consensus was asked too" in capsys.readouterr().out
+    main(["register", str(tmp_path / "twin.npy"), str(tmp_path / "room.npy"), *scene])
+    assert "FPFH's consensus was asked" not in capsys.readouterr().out
