@@ -273,6 +273,19 @@ def test_the_fallback_asks_the_second_part_only_when_the_first_is_weak():
     np.testing.assert_array_equal(rescued.transformation, run(weak, "hypotheses").transformation)
 
 
+def test_the_fallback_gives_the_same_bytes_on_any_thread_count():
+    """register()'s default for the scene model where FPFH is asked (a room scan against
+    noise): one thread and every core give the same transformation and scores."""
+    from o3d_rpointhop.datasets import make_room
+
+    room = make_room(3000, random_state=1) + [0.0, 0.0, 2.5]
+    noise = np.random.default_rng(0).uniform(-1, 1, size=(3000, 3)) + [0.0, 0.0, 3.0]
+    runs = [register(noise, room, "scene", viewpoints="origin", n_jobs=n_jobs) for n_jobs in (1, 2)]
+    assert all(r.steps[0].info["fallback"] is True for r in runs)
+    np.testing.assert_array_equal(runs[0].transformation, runs[1].transformation)
+    assert runs[0].steps[0].info["hypothesis_scores"] == runs[1].steps[0].info["hypothesis_scores"]
+
+
 @pytest.mark.parametrize("support", [-0.1, 1.5, True, "high"])
 def test_min_support_is_a_share(support):
     with pytest.raises(ValueError, match="min_support must be in"):
