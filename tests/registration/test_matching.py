@@ -284,6 +284,12 @@ def test_the_fallback_gives_the_same_bytes_on_any_thread_count():
     assert all(r.steps[0].info["fallback"] is True for r in runs)
     np.testing.assert_array_equal(runs[0].transformation, runs[1].transformation)
     assert runs[0].steps[0].info["hypothesis_scores"] == runs[1].steps[0].info["hypothesis_scores"]
+    # Built on the first part's verification, the scores are the pooled hypotheses'
+    # own (free-space checks included).
+    step = ConsensusGlobal(matcher=PooledMatcher.with_fpfh(combine="hypotheses"))
+    pooled = register(noise, room, "scene", viewpoints="origin", global_method=step)
+    np.testing.assert_array_equal(pooled.transformation, runs[0].transformation)
+    assert pooled.steps[0].info["hypothesis_scores"] == runs[0].steps[0].info["hypothesis_scores"]
 
 
 @pytest.mark.parametrize("support", [-0.1, 1.5, True, "high"])

@@ -177,24 +177,26 @@ class GlobalStep(RegistrationStep):
         estimate: np.ndarray,
         distance: float,
         corr: Correspondences,
-    ) -> tuple[np.ndarray, dict]:
-        """The estimate the step returns, and what its choice reports: with several
-        hypotheses (best first, ``estimate`` the first), the winner of their
-        verification (:func:`~._verification.verify`, against the step's matches
-        ``corr``) as the step estimated it (the short ICP only scores it: the steps
-        after it refine; the step's own choice, kept, is the result ``n_hypotheses=1``
-        gives); else ``estimate``."""
+        known=None,
+    ) -> tuple[np.ndarray, dict, object]:
+        """The estimate the step returns, what its choice reports, and the verification
+        (None without one): with several hypotheses (best first, ``estimate`` the
+        first), the winner of their verification (:func:`~._verification.verify`,
+        against the step's matches ``corr``; ``known``: a verification of the first
+        ones to build on) as the step estimated it (the short ICP only scores it: the
+        steps after it refine; the step's own choice, kept, is the result
+        ``n_hypotheses=1`` gives); else ``estimate``."""
         if len(hypotheses) < 2:
-            return estimate, {}
+            return estimate, {}, None
         matched = GlobalStep._matched(context, corr)
         threads = kernel_threads(self.n_jobs)
-        check = verify(context, hypotheses, distance, matched, self.max_violation, threads)
+        check = verify(context, hypotheses, distance, matched, self.max_violation, threads, known)
         info = {
             "hypothesis_scores": [round(float(s), 6) for s in check.scores],
             "chosen_hypothesis": check.best,
             "margin": check.margin,
         }
-        return hypotheses[check.best], info
+        return hypotheses[check.best], info, check
 
     def _result_of(
         self,
@@ -202,15 +204,17 @@ class GlobalStep(RegistrationStep):
         found,
         distance: float,
         corr: Correspondences,
+        known=None,
         **info,
-    ) -> StepResult:
+    ) -> tuple[StepResult, object]:
         """The step's result from what its estimator ``found`` (``hypotheses`` best first,
         ``transformation``, the matches' ``inliers``): the choice among the hypotheses
-        (:meth:`_chosen`), measured (:meth:`_measured`) with the step's own ``info``."""
-        estimate, chosen = self._chosen(
-            context, found.hypotheses, found.transformation, distance, corr
+        (:meth:`_chosen`, building on the verification ``known``), measured
+        (:meth:`_measured`) with the step's own ``info``; and the verification."""
+        estimate, chosen, check = self._chosen(
+            context, found.hypotheses, found.transformation, distance, corr, known
         )
-        return self._measured(
+        result = self._measured(
             context,
             self.name,
             estimate,
@@ -220,6 +224,7 @@ class GlobalStep(RegistrationStep):
             **info,
             **chosen,
         )
+        return result, check
 
     @staticmethod
     def _measured(

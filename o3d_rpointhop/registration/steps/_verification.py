@@ -42,12 +42,18 @@ class Verification:
         ``1 - rival / winner``, the rival being the best-scored hypothesis that did not
         refine into the winner (1 when there is none): 0 is a tie, and below 0 a rival
         scored higher without beating the step's own choice by :data:`SWITCH_MARGIN`.
+    overlaps : ndarray of shape (k,)
+        Every refined hypothesis's :func:`overlap_score` (free of the matches).
+    free : ndarray of shape (k,) of bool
+        Whether each passed the free-space check (all True without one).
     """
 
     best: int
     scores: np.ndarray
     refined: np.ndarray
     margin: float
+    overlaps: np.ndarray
+    free: np.ndarray
 
 
 def verify(
@@ -57,6 +63,7 @@ def verify(
     matched: tuple[np.ndarray, np.ndarray],
     max_violation: float | None = None,
     n_threads: int = 1,
+    known: Verification | None = None,
 ) -> Verification:
     """Refine every hypothesis (centred frame) by a short point-to-plane ICP on the
     global clouds within ``distance`` and score it by its :func:`overlap_score` (with
@@ -81,6 +88,10 @@ def verify(
     n_threads : int, default=1
         Threads the hypotheses are shared out over (each is refined and scored alone:
         the result does not depend on it).
+    known : Verification, default=None
+        A verification of the first hypotheses on the same context and distance (with
+        other matches): their refinement, overlap and free-space check are taken from
+        it, only their match support is measured again; the result is the same.
 
     Returns
     -------
@@ -96,23 +107,26 @@ def verify(
         np.asarray(context.with_normals(w, level).normals) for w in ("source", "target")
     )
     grids = (CellGrid(source, distance), CellGrid(target, distance))
-    if grids[1].on_cells:
+    done = 0 if known is None else len(known.refined)
+    new = hypotheses[done:]
+    if not len(new):
+        refined = np.empty((0, 4, 4))
+    elif grids[1].on_cells:
         refined = refine_point_to_plane(
-            source, grids[1], normals[1], hypotheses, REFINE_ITERATIONS, n_threads
+            source, grids[1], normals[1], new, REFINE_ITERATIONS, n_threads
         )
     else:  # a cloud too wide for a grid at this distance: Open3D's ICP
         icp = PointToPlaneICP(distance, max_iteration=REFINE_ITERATIONS, full_resolution=False)
-        refined = np.stack([icp._run_timed(coarse, h).transformation for h in hypotheses])
-    scores = np.empty(len(refined))
+        refined = np.stack([icp._run_timed(coarse, h).transformation for h in new])
+    overlaps = np.empty(len(refined))
 
-    def score(k: int) -> None:
-        t = refined[k]
-        overlap = overlap_score(source, target, t, distance, normals, grids)
-        scores[k] = overlap * match_support(matched, t, distance)
+    def overlap(k: int) -> None:
+        overlaps[k] = overlap_score(source, target, refined[k], distance, normals, grids)
 
-    map_threads(score, [(k,) for k in range(len(refined))], n_threads)
+    map_threads(overlap, [(k,) for k in range(len(refined))], n_threads)
+    free = np.ones(len(refined), dtype=bool)
     views, limit = context.viewpoints, max_violation
-    if views is not None and limit is not None:
+    if views is not None and limit is not None and len(refined):
         # A pose that puts more than ``limit`` of a cloud where the other sensor saw
         # empty space is wrong however well it fits (free_space.py).
         seen = free_space_violations(
@@ -124,11 +138,24 @@ def verify(
             context.voxel_size,
             n_threads=n_threads,
         )
-        scores = np.where(seen <= limit, scores, 0.0)
+        free = seen <= limit
+    if known is not None:
+        refined = np.concatenate([known.refined, refined])
+        overlaps = np.concatenate([known.overlaps, overlaps])
+        free = np.concatenate([known.free, free])
+    support = np.array([match_support(matched, t, distance) for t in refined])
+    scores = np.where(free, overlaps * support, 0.0)
     best = int(np.argmax(scores))
     if scores[best] <= (1.0 + SWITCH_MARGIN) * scores[0]:
         best = 0
     centre = source.mean(axis=0)
     rivals = scores[apart_from(refined, refined[best], centre, DISTINCT_SHIFT * distance)]
     margin = 1.0 if not len(rivals) or scores[best] <= 0 else 1.0 - rivals.max() / scores[best]
-    return Verification(best=best, scores=scores, refined=refined, margin=float(margin))
+    return Verification(
+        best=best,
+        scores=scores,
+        refined=refined,
+        margin=float(margin),
+        overlaps=overlaps,
+        free=free,
+    )

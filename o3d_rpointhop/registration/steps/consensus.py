@@ -147,10 +147,12 @@ class ConsensusGlobal(GlobalStep):
             matcher = self._matcher()
             parts = self._part_matches(context, slice(1))
             runs = [self._consensus(context, parts[0], distance)]
+            known = None
             if matcher.combine == "fallback":
                 # The first part alone, kept when its estimate explains enough of its
-                # matches; else the others are asked too.
-                first = self._result_of(
+                # matches; else the others are asked too, and the verification of its
+                # hypotheses is built on.
+                first, known = self._result_of(
                     context, runs[0], distance, parts[0], hypotheses=runs[0].n_hypotheses
                 )
                 if np.mean(first.match_inliers) >= matcher.min_support:
@@ -168,10 +170,10 @@ class ConsensusGlobal(GlobalStep):
             ]
         else:
             corr = self._matches(context)
-            found = self._consensus(context, corr, distance)
+            found, known = self._consensus(context, corr, distance), None
         return self._result_of(
-            context, found, distance, corr, hypotheses=found.n_hypotheses, **info
-        )
+            context, found, distance, corr, known, hypotheses=found.n_hypotheses, **info
+        )[0]
 
     def _consensus(self, context: RegistrationContext, corr, distance: float):
         """The consensus on the matches ``corr``."""

@@ -111,4 +111,4 @@ class RANSACGlobal(GlobalStep):
             upright=None if context.up is None else context.upright,
             n_hypotheses=int(self.n_hypotheses),
         )
-        return self._result_of(context, found, distance, corr, iterations=found.iterations)
+        return self._result_of(context, found, distance, corr, iterations=found.iterations)[0]
