@@ -217,8 +217,10 @@ def with_fpfh(step: Any, register: dict[str, Any], descriptor: Any) -> Any:
     if value == "auto" or (descriptor is None and register["global_method"] == "auto"):
         return step
     if value is False:
-        if isinstance(step, ConsensusGlobal) and own_matcher(step)[0]:
-            return step.set_params(matcher=own_matcher(step)[1])
+        if isinstance(step, ConsensusGlobal):
+            pooled, own = own_matcher(step)
+            if pooled:
+                return step.set_params(matcher=own)
         return step
     if isinstance(descriptor, FPFHTransformer):
         raise UsageError("--with-fpfh adds FPFH beside R-PointHop; --descriptor fpfh has it")

@@ -40,7 +40,6 @@ def registration_options(
             raise UsageError("--symmetry-check needs an ICP refinement (--refine)")
         names.append("symmetry_check")
     global_method = register["global_method"]
-    views = _viewpoints(register["viewpoints"], descriptor)
     try:
         chain = build_chain(
             None if global_method == "none" else global_method,
@@ -70,7 +69,7 @@ def registration_options(
         "n_global_points": register["n_global_points"],
         "random_state": register["random_state"],
         "settings": settings,
-        "viewpoints": views,
+        "viewpoints": _viewpoints(register["viewpoints"], descriptor),
         "up": register["up"],
     }
 

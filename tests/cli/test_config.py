@@ -33,6 +33,18 @@ def _run(capsys, args) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
+def _assert_config_repeats(capsys, tmp_path, files, out, line):
+    """``config --from`` a run's JSON writes a config holding ``line`` that gives the
+    run's transformation again."""
+    (tmp_path / "out.json").write_text(json.dumps(out))
+    assert (
+        main(["config", "--from", str(tmp_path / "out.json"), "-o", str(tmp_path / "c.toml")]) == 0
+    )
+    assert line in (tmp_path / "c.toml").read_text()
+    again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
+    assert again["transformation"] == out["transformation"]
+
+
 def test_the_printed_defaults_are_a_config_that_changes_nothing(tmp_path, capsys, pair):
     assert main(["config", "-o", str(tmp_path / "c.toml")]) == 0
     config = tomllib.loads((tmp_path / "c.toml").read_text())
@@ -264,13 +276,7 @@ def test_with_fpfh_runs_the_pooled_hypotheses_and_a_config_repeats_it(tmp_path, 
         viewpoints=None,
     )
     np.testing.assert_allclose(out["transformation"], library.transformation, atol=1e-12)
-    (tmp_path / "out.json").write_text(json.dumps(out))
-    assert (
-        main(["config", "--from", str(tmp_path / "out.json"), "-o", str(tmp_path / "c.toml")]) == 0
-    )
-    assert "with_fpfh = true" in (tmp_path / "c.toml").read_text()
-    again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
-    assert again["transformation"] == out["transformation"]
+    _assert_config_repeats(capsys, tmp_path, files, out, "with_fpfh = true")
     plain = _run(
         capsys, [*files, "--model", "scene", "--viewpoints", "none", "--with-fpfh", "never"]
     )
@@ -298,13 +304,7 @@ def test_the_scene_path_asks_fpfh_as_a_fallback(tmp_path, capsys, pair):
     assert out["provenance"]["config"]["register"]["with_fpfh"] == "fallback"
     library = register(source, target, "scene", viewpoints="origin")
     np.testing.assert_allclose(out["transformation"], library.transformation, atol=1e-12)
-    (tmp_path / "out.json").write_text(json.dumps(out))
-    assert (
-        main(["config", "--from", str(tmp_path / "out.json"), "-o", str(tmp_path / "c.toml")]) == 0
-    )
-    assert 'with_fpfh = "fallback"' in (tmp_path / "c.toml").read_text()
-    again = _run(capsys, [*files, "--config", str(tmp_path / "c.toml")])
-    assert again["transformation"] == out["transformation"]
+    _assert_config_repeats(capsys, tmp_path, files, out, 'with_fpfh = "fallback"')
 
     alone = _run(capsys, [*files, *scene, "--with-fpfh", "never"])
     assert alone["provenance"]["config"]["register"]["with_fpfh"] is False
