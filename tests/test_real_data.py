@@ -204,6 +204,28 @@ def test_bunny_benchmark_places_every_scan_sharing_a_fifth_with_bun000(shared_da
         run_bunny(["nowhere"], ["icp"], data=shared_data, progress=False)
 
 
+def test_bunny_benchmark_places_the_dragon_scans_sharing_half_with_the_first(shared_data):
+    """The dragon's protocol through register()'s object path: the six scans against
+    dragonStandRight_0, each overlap the share the true pose brings within 2 mm, and
+    every scan sharing more than half of it placed within 2 deg and 2 mm
+    (docs/benchmarks.md)."""
+    from o3d_rpointhop.evaluation.bunny import default_protocols, run_bunny
+
+    assert "dragon" in default_protocols(shared_data)
+    results = run_bunny(["dragon"], ["rpointhop-ransac-icp"], data=shared_data, progress=False)
+    dragon = results["protocols"]["dragon"]
+    overlap = dragon["overlap"]
+    assert len(overlap) == 6
+    assert overlap["dragonStandRight_24"] > 0.9 and overlap["dragonStandRight_96"] < 0.2
+    placed = {
+        r["pair"]
+        for r in dragon["records"]["rpointhop-ransac-icp"]
+        if r["rotation_error_deg"] < 2.0 and r["translation_error"] < 0.002
+    }
+    shared = {name for name, share in overlap.items() if share > 0.5}
+    assert len(shared) == 4 and shared <= placed
+
+
 @pytest.mark.slow
 def test_multiway_benchmark_rebuilds_the_dragon_and_reports_it(shared_data, tmp_path):
     """The scan-set benchmark on the dragon's 7 scans, each moved by a random motion

@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _pairs(args: argparse.Namespace, methods: list[str], common: dict) -> dict:
     """The pair benchmark of ``args.dataset``."""
-    from ..evaluation.bunny import run_bunny
+    from ..evaluation.bunny import default_protocols, run_bunny
     from ..evaluation.modelnet40 import MODELNET40_PROTOCOLS, run_modelnet40
     from ..evaluation.threedmatch import run_3dmatch
 
@@ -119,7 +119,8 @@ def _pairs(args: argparse.Namespace, methods: list[str], common: dict) -> dict:
         protocols = args.protocol or list(MODELNET40_PROTOCOLS)
         results = run_modelnet40(protocols, methods, max_shapes=args.max_shapes, **common)
     elif args.dataset == "bunny":
-        results = run_bunny(args.protocol or ["scans", "paper"], methods, **common)
+        protocols = args.protocol or default_protocols(common.get("data"))
+        results = run_bunny(protocols, methods, **common)
     else:
         if args.protocol:
             raise CommandError("3dmatch has no protocols to choose")

@@ -21,7 +21,7 @@ from .metrics import overlap_share
 from .provenance import run_provenance
 from .records import as_rows
 
-__all__ = ["BUNNY_PROTOCOLS", "OVERLAP_DISTANCE", "run_bunny"]
+__all__ = ["BUNNY_PROTOCOLS", "DRAGON_TARGET", "OVERLAP_DISTANCE", "default_protocols", "run_bunny"]
 
 #: Two scans' points within this distance (about four point spacings of the Stanford
 #: scans) count as the same surface: a scan's overlap with bun000 is the share of its
@@ -33,7 +33,24 @@ BUNNY_PROTOCOLS = {
     "paper": "the paper's: each scan against a differently sampled copy of itself (2048 "
     "random points each), moved by Euler angles in [0, 45] deg and a translation in "
     "[-0.5, 0.5] m",
+    "dragon": "the Stanford dragon's real range scans registered to dragonStandRight_0, "
+    "ground truth from dragonStandRight.conf",
 }
+
+#: The dragon scan the others are registered to (the first of the stand's turntable).
+DRAGON_TARGET = "dragonStandRight_0"
+
+
+def default_protocols(data=None) -> list[str]:
+    """The protocols run when none is named: the bunny's two, and the dragon's when its
+    scans are in the data folder."""
+    from ..datasets.bunny import load_dragon
+
+    try:
+        load_dragon(data)
+    except FileNotFoundError:
+        return ["scans", "paper"]
+    return ["scans", "paper", "dragon"]
 
 
 def run_bunny(
@@ -45,23 +62,34 @@ def run_bunny(
     model: RPointHopTransformer | None = None,
     progress: bool = True,
 ) -> dict:
-    """Stanford Bunny: real scan pairs with ``bun.conf`` poses, and the paper's protocol.
+    """Stanford Bunny: real scan pairs with ``bun.conf`` poses, and the paper's protocol;
+    the Stanford dragon's real scan pairs.
 
     ``"scans"``: every other scan registered to ``bun000`` (success: < 2 deg, < 2 mm),
     with each scan's overlap with ``bun000`` (:func:`~.metrics.overlap_share` at
     :data:`OVERLAP_DISTANCE`) under ``"overlap"``.
+    ``"dragon"``: the same for the dragon's "stand" scans present in the data folder
+    (:func:`~o3d_rpointhop.datasets.bunny.load_dragon`), every other one registered to
+    :data:`DRAGON_TARGET` with the ``dragonStandRight.conf`` poses as ground truth.
     ``"paper"``: each scan against a differently sampled copy of itself (2048 random
     points each) moved by Euler angles in [0, 45] deg and a translation in
     [-0.5, 0.5] m, as in the paper (success: < 5 deg, < 5 mm).
     """
     from scipy.spatial.transform import Rotation
 
-    from ..datasets.bunny import BUNNY_SCANS, load_bunny
+    from ..datasets.bunny import BUNNY_SCANS, load_bunny, load_dragon
     from .protocols import Pair
 
     methods = check_methods(methods, "bunny")
     model = model if model is not None else default_descriptor()
-    scans = load_bunny(BUNNY_SCANS, data)
+    protocols = list(protocols)
+    unknown = [p for p in protocols if p not in BUNNY_PROTOCOLS]
+    if unknown:
+        raise ValueError(
+            f"unknown bunny protocol {unknown[0]!r}; choose from {list(BUNNY_PROTOCOLS)}"
+        )
+    scans = load_bunny(BUNNY_SCANS, data) if {"scans", "paper"} & set(protocols) else {}
+    dragon = load_dragon(data) if "dragon" in protocols else {}
     out = {
         "dataset": "bunny",
         "settings": {"seed": seed, **model_facts(model), **machine_facts()},
@@ -71,12 +99,15 @@ def run_bunny(
     rng = np.random.default_rng(seed)
 
     for protocol in protocols:
-        if protocol == "scans":
-            target = scans["bun000"]
+        if protocol in ("scans", "dragon"):
+            found, first = (scans, "bun000") if protocol == "scans" else (dragon, DRAGON_TARGET)
+            if first not in found:
+                raise FileNotFoundError(f"{protocol}: no scan {first} in the data folder")
+            target = found[first]
             pairs = [
                 Pair(s.points, target.points, s.relative_pose(target), s.points, name)
-                for name, s in scans.items()
-                if name != "bun000"
+                for name, s in found.items()
+                if name != first
             ]
             tol = (2.0, 0.002)
             overlap = {
@@ -95,8 +126,8 @@ def run_bunny(
                 pairs.append(Pair(truth_src @ rot.T + shift, target, truth, truth_src, name))
             tol = (5.0, 0.005)
             overlap = None
-        else:
-            raise ValueError(f"unknown bunny protocol {protocol!r}; choose 'scans' or 'paper'")
+        else:  # checked above
+            raise AssertionError(protocol)
         bar = Progress(len(methods) * len(pairs), f"bunny {protocol}", progress)
         summaries, records = evaluate_methods(
             pairs, methods, model, register_resolution, seed, bar, tol=tol
