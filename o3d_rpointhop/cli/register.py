@@ -66,7 +66,7 @@ def add_parser(commands) -> None:
         default=None,
         help="the consensus on FPFH's matches too, every hypothesis of both verified "
         "together: always (more pairs that overlap little, about twice the time), "
-        "fallback (only where the model's estimate explains under 1%% of its matches: "
+        "fallback (only where the model's estimate explains under 1.5%% of its matches: "
         "the default for --model scene), or never (docs/low_overlap.md)",
     )
     refinements = [name for name in REFINE_METHODS if name != "symmetry_check"]

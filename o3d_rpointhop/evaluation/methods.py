@@ -471,7 +471,7 @@ METHODS = _methods(
     Method(
         "rpointhop-scene-fpfh-fallback",
         "R-PointHop, shipped scene model: its consensus alone, and when its estimate "
-        "explains under 1 % of its matches one on FPFH's too, 16 (auto) hypotheses of "
+        "explains under 1.5 % of its matches one on FPFH's too, 16 (auto) hypotheses of "
         "each verified together + point-to-plane ICP",
         _register_with(global_method=pooled_hypotheses_step(combine="fallback")),
         datasets=_SCENES,

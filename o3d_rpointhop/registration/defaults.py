@@ -11,6 +11,7 @@ __all__ = [
     "DEFAULT_MODEL",
     "DEFAULT_GLOBAL_METHOD",
     "DEFAULT_GLOBAL_POINTS",
+    "FALLBACK_SUPPORT",
     "FPFH_FALLBACK",
     "SCENE_FPFH_WEIGHT",
     "TRUST_SUPPORT",
@@ -46,8 +47,16 @@ DEFAULT_GLOBAL_POINTS = 2048
 #: so scene models state it and FPFH on scenes takes ``global_method="consensus"``.
 DEFAULT_GLOBAL_METHOD = "ransac"
 
+#: The share of its matches under which the model's estimate makes the FPFH fallback
+#: ask FPFH's consensus too (``PooledMatcher(combine="fallback")``'s ``min_support``),
+#: chosen by ``benchmarks/fallback_selection.py`` on every official pair of the four
+#: training scenes (the most pairs registered, then the smallest share): 118 / 121
+#: and 163 / 195 (3DMatch / 3DLoMatch) from 0.015 to 0.03, against 117 and 163 at 0.01,
+#: FPFH asked on 16 + 90 pairs against 8 + 52.
+FALLBACK_SUPPORT = 0.015
+
 #: Whether ``register()``'s consensus, where a model states it (``global_method="auto"``),
-#: asks FPFH too when the model's estimate explains under :data:`TRUST_SUPPORT` of its
+#: asks FPFH too when the model's estimate explains under :data:`FALLBACK_SUPPORT` of its
 #: matches (``PooledMatcher(combine="fallback")``: FPFH's consensus beside the model's,
 #: every hypothesis verified together). Chosen on every official pair of the scene
 #: model's four training scenes: with the sensors known

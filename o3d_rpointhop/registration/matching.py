@@ -31,7 +31,7 @@ from .correspondences import (
     turned_correspondences,
     unit_rows,
 )
-from .defaults import TRUST_SUPPORT
+from .defaults import FALLBACK_SUPPORT
 
 __all__ = ["Matcher", "PooledMatcher"]
 
@@ -300,8 +300,8 @@ class PooledMatcher(BaseEstimator):
 
     With ``combine="fallback"`` the first part runs alone, as without the others, and
     the others are asked only when its estimate explains less than ``min_support`` of
-    its matches (the pose its matches barely single out, the result the command line
-    would not trust): then their consensus runs too and every hypothesis is verified
+    its matches (a pose its matches barely single out, near the results the command
+    line would not trust): then their consensus runs too and every hypothesis is verified
     together, as with ``"hypotheses"``. Pairs that overlap well pay for one
     descriptor; the ones that overlap little get the second (docs/low_overlap.md,
     "FPFH as a fallback").
@@ -316,11 +316,11 @@ class PooledMatcher(BaseEstimator):
         hypotheses of one consensus per part (:class:`~o3d_rpointhop.ConsensusGlobal`),
         or those hypotheses only when the first part's own estimate is weak (also the
         consensus only).
-    min_support : float, default=0.01
+    min_support : float, default=0.015
         With ``combine="fallback"``: the least share of the first part's matches its
         estimate must explain (within the step's inlier distance) for the others not
-        to be asked; the command line's trust threshold
-        (:data:`~o3d_rpointhop.registration.defaults.TRUST_SUPPORT`).
+        to be asked (:data:`~o3d_rpointhop.registration.defaults.FALLBACK_SUPPORT`,
+        chosen on the training scenes; the command line trusts a result from 0.01).
 
     Examples
     --------
@@ -336,7 +336,7 @@ class PooledMatcher(BaseEstimator):
     """
 
     def __init__(
-        self, parts: list, combine: str = "matches", min_support: float = TRUST_SUPPORT
+        self, parts: list, combine: str = "matches", min_support: float = FALLBACK_SUPPORT
     ) -> None:
         self.parts = parts
         self.combine = combine

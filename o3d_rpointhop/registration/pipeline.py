@@ -549,7 +549,7 @@ def register(
         ``init``). ``"auto"``: the step that won on the descriptor's training data
         (:func:`~o3d_rpointhop.registration.defaults.resolve_global_method`): the
         consensus for the shipped scene model, which states it, with FPFH's consensus
-        beside it for a pair where the model's estimate explains under 1 % of its
+        beside it for a pair where the model's estimate explains under 1.5 % of its
         matches (``PooledMatcher(..., combine="fallback")``, docs/low_overlap.md;
         ``"consensus"`` is the model alone); RANSAC for the ModelNet40 model, FPFH and
         anything that states nothing.
