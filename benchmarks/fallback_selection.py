@@ -71,8 +71,7 @@ def _pairs(data) -> list:
 def _step(min_support: float):
     from o3d_rpointhop import ConsensusGlobal, PooledMatcher
 
-    matcher = PooledMatcher.with_fpfh(combine="fallback")
-    matcher.min_support = min_support
+    matcher = PooledMatcher.with_fpfh(combine="fallback").set_params(min_support=min_support)
     return ConsensusGlobal(matcher=matcher)
 
 

@@ -177,6 +177,15 @@ def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
 
 
 @pytest.mark.slow
+def _placed_within_2_deg_2_mm(records: list[dict]) -> set[str]:
+    """The scans of a bunny-benchmark protocol's records placed within 2 deg and 2 mm."""
+    return {
+        r["pair"]
+        for r in records
+        if r["rotation_error_deg"] < 2.0 and r["translation_error"] < 0.002
+    }
+
+
 def test_bunny_benchmark_places_every_scan_sharing_a_fifth_with_bun000(shared_data):
     """The bunny benchmark's two protocols through register()'s object path: every scan
     whose overlap with bun000 is above a fifth placed within 2 deg and 2 mm (issue
@@ -191,11 +200,7 @@ def test_bunny_benchmark_places_every_scan_sharing_a_fifth_with_bun000(shared_da
     overlap = scans["overlap"]
     assert len(overlap) == 9 and all(0.0 <= v <= 1.0 for v in overlap.values())
     assert overlap["bun045"] > 0.9 and overlap["bun180"] < 0.05  # beside / behind bun000
-    placed = {
-        r["pair"]
-        for r in scans["records"]["rpointhop-ransac-icp"]
-        if r["rotation_error_deg"] < 2.0 and r["translation_error"] < 0.002
-    }
+    placed = _placed_within_2_deg_2_mm(scans["records"]["rpointhop-ransac-icp"])
     shared = {name for name, share in overlap.items() if share > 0.2}
     assert len(shared) == 6 and shared <= placed
     paper = results["protocols"]["paper"]["summary"]["rpointhop-ransac-icp"]
@@ -217,11 +222,7 @@ def test_bunny_benchmark_places_the_dragon_scans_sharing_half_with_the_first(sha
     overlap = dragon["overlap"]
     assert len(overlap) == 6
     assert overlap["dragonStandRight_24"] > 0.9 and overlap["dragonStandRight_96"] < 0.2
-    placed = {
-        r["pair"]
-        for r in dragon["records"]["rpointhop-ransac-icp"]
-        if r["rotation_error_deg"] < 2.0 and r["translation_error"] < 0.002
-    }
+    placed = _placed_within_2_deg_2_mm(dragon["records"]["rpointhop-ransac-icp"])
     shared = {name for name, share in overlap.items() if share > 0.5}
     assert len(shared) == 4 and shared <= placed
 

@@ -11,7 +11,14 @@ from scipy.spatial.transform import Rotation
 
 from ._paths import data_home
 
-__all__ = ["BunnyScan", "load_bunny", "load_dragon", "read_bun_conf", "BUNNY_SCANS"]
+__all__ = [
+    "BunnyScan",
+    "dragon_files",
+    "load_bunny",
+    "load_dragon",
+    "read_bun_conf",
+    "BUNNY_SCANS",
+]
 
 BUNNY_SCANS = (
     "bun000",
@@ -110,9 +117,43 @@ def load_bunny(
     return out
 
 
+def dragon_files(
+    data_dir: str | os.PathLike | None = None,
+) -> tuple[Path, dict[str, tuple[Path, np.ndarray]]]:
+    """The folder of the Stanford dragon "stand" scans, and the scans present in it, in
+    turntable order: each name's file and ``dragonStandRight.conf`` pose (the same
+    convention as ``bun.conf``). Nothing is read but the ``.conf``.
+
+    Parameters
+    ----------
+    data_dir : path, default=None
+        A folder holding ``dragonStandRight.conf`` and the scans, or one holding
+        ``stanford/dragon_stand/`` (the shared data layout).
+
+    Raises
+    ------
+    FileNotFoundError
+        Without the ``.conf``.
+    """
+    root = Path(data_dir).expanduser() if data_dir is not None else data_home()
+    folder = (
+        root if (root / "dragonStandRight.conf").is_file() else root / "stanford" / "dragon_stand"
+    )
+    conf = folder / "dragonStandRight.conf"
+    if not conf.is_file():
+        raise FileNotFoundError(f"no dragonStandRight.conf in {folder}")
+    poses = read_bun_conf(conf)
+    found = {}
+    for name in sorted(poses, key=lambda n: int(n.rsplit("_", 1)[1]) if "_" in n else -1):
+        path = folder / f"{name}.ply"
+        if path.is_file():
+            found[name] = (path, poses[name])
+    return folder, found
+
+
 def load_dragon(data_dir: str | os.PathLike | None = None) -> dict[str, BunnyScan]:
     """The Stanford dragon "stand" range scans present in the data folder, with their
-    ``dragonStandRight.conf`` poses (the same convention as ``bun.conf``).
+    ``dragonStandRight.conf`` poses (:func:`dragon_files`).
 
     Parameters
     ----------
@@ -122,19 +163,10 @@ def load_dragon(data_dir: str | os.PathLike | None = None) -> dict[str, BunnySca
     """
     from ..io import read_cloud
 
-    root = Path(data_dir).expanduser() if data_dir is not None else data_home()
-    folder = (
-        root if (root / "dragonStandRight.conf").is_file() else root / "stanford" / "dragon_stand"
-    )
-    conf = folder / "dragonStandRight.conf"
-    if not conf.is_file():
-        raise FileNotFoundError(f"no dragonStandRight.conf in {folder}")
-    poses = read_bun_conf(conf)
-    scans = {}
-    for name in sorted(poses, key=lambda n: int(n.rsplit("_", 1)[1]) if "_" in n else -1):
-        path = folder / f"{name}.ply"
-        if path.is_file():
-            scans[name] = BunnyScan(name, np.asarray(read_cloud(path).points).copy(), poses[name])
-    if len(scans) < 2:
+    folder, found = dragon_files(data_dir)
+    if len(found) < 2:
         raise FileNotFoundError(f"fewer than two dragon scans in {folder}")
-    return scans
+    return {
+        name: BunnyScan(name, np.asarray(read_cloud(path).points).copy(), pose)
+        for name, (path, pose) in found.items()
+    }

@@ -42,15 +42,15 @@ DRAGON_TARGET = "dragonStandRight_0"
 
 
 def default_protocols(data=None) -> list[str]:
-    """The protocols run when none is named: the bunny's two, and the dragon's when its
-    scans are in the data folder."""
-    from ..datasets.bunny import load_dragon
+    """The protocols run when none is named: the bunny's two, and the dragon's when two
+    of its scans or more are in the data folder (listed, not read)."""
+    from ..datasets.bunny import dragon_files
 
     try:
-        load_dragon(data)
+        _, found = dragon_files(data)
     except FileNotFoundError:
         return ["scans", "paper"]
-    return ["scans", "paper", "dragon"]
+    return ["scans", "paper", "dragon"] if len(found) >= 2 else ["scans", "paper"]
 
 
 def run_bunny(
