@@ -244,6 +244,9 @@ class _ColumnCandidates:
         self.values = np.full((n_references, n), np.inf, dtype=queries.dtype)
         self.rows = np.zeros((n_references, n), dtype=np.int64)
         self.kept = np.zeros(n_references, dtype=np.int64)
+        # Each column's largest kept value: infinite until its list is full; no column
+        # keeps any when every query is a candidate.
+        self.last = np.full(n_references, -np.inf if self.every else np.inf, dtype=queries.dtype)
 
     def add(self, block, ref_sq, start: int, n_row: int) -> np.ndarray:
         """Take a block's columns' candidates; return its rows' ``n_row`` candidates."""
@@ -259,6 +262,7 @@ class _ColumnCandidates:
             self.values,
             self.rows,
             self.kept,
+            self.last,
             minus_two,
         )
         return _all_columns(block.shape, n_row) if every_row else row_cand
@@ -321,35 +325,82 @@ def _smallest_rows(values, n):  # pragma: no cover - compiled
     return out
 
 
+#: Entries of a row, spread evenly over it, whose smallest give the bound under which
+#: the row's candidates lie (:func:`_candidates_both_ways`).
+ROW_SAMPLE = 512
+
+
 @kernel()
 def _candidates_both_ways(
-    block, ref_sq, query_sq, n_row, first, n_col, col_values, col_rows, col_kept, minus_two
+    block,
+    ref_sq,
+    query_sq,
+    n_row,
+    first,
+    n_col,
+    col_values,
+    col_rows,
+    col_kept,
+    col_last,
+    minus_two,
 ):  # pragma: no cover - compiled
     """One pass over a block of products ``q . r`` (rows: queries ``first`` on): each
     row's ``n_row`` smallest of ``-2 q.r + |r|^2`` (returned, ``(rows, n_row)``; none
     when ``n_row`` is 0) and, into the running lists ``col_values`` / ``col_rows`` /
-    ``col_kept``, each column's ``n_col`` smallest of ``-2 q.r + |q|^2`` (none when 0).
-    ``minus_two`` holds -2 in the block's dtype, so each value is computed in that dtype
-    as the numpy passes compute it. Both keep a newcomer after the ones it does not beat:
-    value, then index, as :func:`_smallest`."""
+    ``col_kept``, each column's ``n_col`` smallest of ``-2 q.r + |q|^2`` (none when 0;
+    ``col_last``: each column's largest kept value, infinite until its list is full,
+    minus infinity when no column keeps any). ``minus_two`` holds -2 in the block's
+    dtype, so each value is computed in that dtype as the numpy passes compute it. Both
+    keep a newcomer after the ones it does not beat: value, then index, as
+    :func:`_smallest`.
+
+    Few entries of a row can enter either list, so each row is first marked where one
+    might, in a loop the compiler vectorises: a column's entry when it beats the
+    column's largest kept value, a row's when it is no larger than the ``n_row``-th
+    smallest of :data:`ROW_SAMPLE` of the row's entries (that many entries are no
+    larger, so nothing above it is among the row's smallest). Only the marked entries
+    are then offered to the lists, in the order of the plain pass, which gives the same
+    lists to the bit."""
     q, m = block.shape
     out = np.empty((q, max(n_row, 1)), dtype=np.int64)
     best = np.empty(max(n_row, 1), dtype=block.dtype)
     factor = minus_two[0]
+    words = (m + 7) // 8
+    marks = np.zeros(words * 8, dtype=np.uint8)
+    marked = marks.view(np.uint64)  # eight marks a word: unmarked stretches skip fast
+    step = max(1, m // ROW_SAMPLE)
     for i in range(q):
-        kept = 0
         own = query_sq[i]
-        for j in range(m):
-            g = block[i, j] * factor
-            if n_col:
-                w = g + own
-                c = col_kept[j]
-                if c < n_col or w < col_values[j, n_col - 1]:
-                    col_kept[j] = insert_ranked(col_values[j], col_rows[j], c, w, first + i)
-            if n_row:
-                v = g + ref_sq[j]
+        row = block[i]
+        bound = -np.inf
+        if n_row:
+            kept = 0
+            for j in range(0, m, step):
+                v = row[j] * factor + ref_sq[j]
                 if kept < n_row or v < best[n_row - 1]:
                     kept = insert_ranked(best, out[i], kept, v, j)
+            bound = best[n_row - 1] if kept == n_row else np.inf
+        for j in range(m):
+            g = row[j] * factor
+            marks[j] = (g + ref_sq[j] <= bound) | ((g + own < col_last[j]) << 1)
+        kept = 0
+        for word in range(words):
+            if not marked[word]:
+                continue
+            for j in range(8 * word, min(m, 8 * word + 8)):
+                mark = marks[j]
+                if not mark:
+                    continue
+                g = row[j] * factor
+                if mark & 1:
+                    v = g + ref_sq[j]
+                    if kept < n_row or v < best[n_row - 1]:
+                        kept = insert_ranked(best, out[i], kept, v, j)
+                if mark & 2:
+                    c = insert_ranked(col_values[j], col_rows[j], col_kept[j], g + own, first + i)
+                    col_kept[j] = c
+                    if c == n_col:
+                        col_last[j] = col_values[j, n_col - 1]
     return out
 
 

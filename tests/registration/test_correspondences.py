@@ -93,13 +93,14 @@ def _tied_descriptors(dtype, n, m, seed):
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize(
-    "n, m, k, k_back", [(200, 260, 2, 2), (200, 260, 2, 1), (260, 200, 1, 3), (5, 4, 3, 2)]
+    "n, m, k, k_back",
+    [(200, 260, 2, 2), (200, 260, 2, 1), (260, 200, 1, 3), (5, 4, 3, 2), (300, 1400, 2, 2)],
 )
 @pytest.mark.parametrize("chunk", [None, 3000])
 def test_both_ways_are_the_two_one_way_searches(dtype, n, m, k, k_back, chunk, monkeypatch):
     """One pass over the distances gives both directions' neighbours, bit for bit as
-    two calls give them (ties included, over several blocks of rows, and where every
-    row is a candidate)."""
+    two calls give them (ties included, over several blocks of rows, where every row is
+    a candidate, and with rows longer than the sample that bounds their candidates)."""
     from o3d_rpointhop.registration import correspondences as module
 
     if chunk is not None:
