@@ -495,13 +495,22 @@ def find_correspondences(
 
 
 def correspondences_both_ways(
-    source_features, target_features, *, max_ratio: float | None = None, k: int = 1
+    source_features,
+    target_features,
+    *,
+    max_ratio: float | None = None,
+    k: int = 1,
+    max_queries: int | None = None,
 ) -> tuple[Correspondences, Correspondences]:
     """``find_correspondences(source, target)`` and ``find_correspondences(target,
     source)`` (each with ``max_ratio``), or with ``k`` above 1 the two directions'
     :func:`k_best_correspondences`, from one pass over the descriptors' distances
     (:func:`nearest_both_ways`): the same matches as the two calls, for half the
     products.
+
+    With ``max_queries``, a direction whose clouds has more points searches from that
+    many of them, spread evenly by index, each against every point of the other cloud
+    (for a caller that keeps a few thousand matches of clouds several times larger).
 
     Returns
     -------
@@ -513,19 +522,46 @@ def correspondences_both_ways(
         raise ValueError("max_ratio is defined on the nearest descriptor alone: not with k > 1")
     memo = _SHARED.get()
     if memo is not None:
-        swapped = memo.get((id(target_features), id(source_features), max_ratio, k))
+        swapped = memo.get((id(target_features), id(source_features), max_ratio, k, max_queries))
         if swapped is not None:
             return swapped[1], swapped[0]
-    found = _both_ways(source_features, target_features, max_ratio, k)
+    found = _both_ways(source_features, target_features, max_ratio, k, max_queries)
     if memo is not None:
-        key = (id(source_features), id(target_features), max_ratio, k)
+        key = (id(source_features), id(target_features), max_ratio, k, max_queries)
         memo[key] = (*found, source_features, target_features)
     return found
 
 
-def _both_ways(source_features, target_features, max_ratio, k: int):
+def _spread(n: int, count: int | None) -> np.ndarray | None:
+    """``count`` indices of ``n`` spread evenly (None when ``count`` is None or not
+    below ``n``: every index)."""
+    if count is None or count >= n:
+        return None
+    return np.unique(np.linspace(0, n - 1, count).astype(np.int64))
+
+
+def _one_way(queries, references, rows, max_ratio, k: int) -> Correspondences:
+    """The matches of the query rows ``rows`` (None: all) among every reference, as
+    one direction of :func:`_both_ways` gives them, indexed in the whole query cloud."""
+    chosen = queries if rows is None else queries[rows]
+    if k > 1:
+        k_ref = min(k, len(references))
+        found = _k_best(*nearest_descriptors(chosen, references, k_ref + 1), k_ref)
+    else:
+        idx, dist = nearest_descriptors(chosen, references, k=2)
+        found = _filtered(idx, dist, None, None, max_ratio, None, None)
+    if rows is not None:
+        found.pairs[:, 0] = rows[found.pairs[:, 0]]
+    return found
+
+
+def _both_ways(source_features, target_features, max_ratio, k: int, max_queries=None):
     """:func:`correspondences_both_ways`, computed."""
     src, tgt = _feature_pair(source_features, target_features)
+    rows, columns = _spread(len(src), max_queries), _spread(len(tgt), max_queries)
+    if rows is not None or columns is not None:
+        forward = _one_way(src, tgt, rows, max_ratio, k)
+        return forward, _one_way(tgt, src, columns, max_ratio, k)
     if k > 1:
         k_src, k_tgt = min(k, len(tgt)), min(k, len(src))
         (idx, dist), (back_idx, back_dist) = nearest_both_ways(src, tgt, k_src + 1, k_tgt + 1)

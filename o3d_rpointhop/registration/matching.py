@@ -94,6 +94,13 @@ class Matcher(BaseEstimator):
         Which matches stay when there are more than ``max_matches``: evenly spread by
         index (no region favoured), or the smallest descriptor distances (which favours
         flat, repeated regions, whose descriptors are the most alike).
+    max_queries : int, default=None
+        With ``both_directions``: each direction searches from at most this many of
+        its cloud's points, spread evenly by index, each against every point of the
+        other cloud (``None``: from every point). For clouds several times larger than
+        the matches kept (``max_matches``), the search then costs what the kept
+        matches need; :func:`~o3d_rpointhop.register_multiway` screens scans of rooms
+        with half the consensus's cap in each direction (docs/multiway.md).
 
     See Also
     --------
@@ -118,6 +125,7 @@ class Matcher(BaseEstimator):
         "frame_turns": [Options(Integral, set(N_TURNS_ALLOWED))],
         "max_matches": [None, Interval(Integral, 3, None, closed="left")],
         "cap": [StrOptions({"index", "distance"})],
+        "max_queries": [None, Interval(Integral, 3, None, closed="left")],
     }
 
     def __init__(
@@ -132,6 +140,7 @@ class Matcher(BaseEstimator):
         frame_turns: int = 1,
         max_matches: int | None = None,
         cap: str = "index",
+        max_queries: int | None = None,
     ) -> None:
         self.metric = metric
         self.mutual_filter = mutual_filter
@@ -142,6 +151,7 @@ class Matcher(BaseEstimator):
         self.frame_turns = frame_turns
         self.max_matches = max_matches
         self.cap = cap
+        self.max_queries = max_queries
 
     @property
     def unit(self) -> bool:
@@ -163,6 +173,14 @@ class Matcher(BaseEstimator):
                 f"Matcher: n_nearest={self.n_nearest} cannot be combined with "
                 "mutual_filter or max_ratio (both are defined on the nearest descriptor "
                 "alone)"
+            )
+        if self.max_queries is not None and not (
+            self.both_directions and not self.mutual_filter and self.frame_turns == 1
+        ):
+            raise ValueError(
+                "Matcher: max_queries needs both_directions=True, without mutual_filter "
+                "or frame_turns (it thins the queries of the one pass that matches both "
+                "ways)"
             )
         if self.frame_turns > 1 and (exclusive or self.n_nearest > 1):
             raise ValueError(
@@ -225,7 +243,7 @@ class Matcher(BaseEstimator):
         if both_ways and not turned:
             # Both directions from one pass over the descriptors' distances.
             corr, back = correspondences_both_ways(
-                src, tgt, max_ratio=self.max_ratio, k=self.n_nearest
+                src, tgt, max_ratio=self.max_ratio, k=self.n_nearest, max_queries=self.max_queries
             )
             if self.n_nearest == 1:
                 _enough(who, len(corr), "correspondences survived the filters", _RELAX)

@@ -70,6 +70,9 @@ MAX_FREE_SPACE_VIOLATION = 0.1
 RETRIEVED_NEIGHBOURS = 6
 #: Up to this many scans, every pair is a candidate.
 ALL_PAIRS_UP_TO = 12
+#: A screening whose matcher keeps at most ``max_matches`` matches found both ways
+#: searches from this share of that count in each direction (None: from every point).
+SCREENING_QUERIES = 0.5
 
 
 def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any = "ransac"):
@@ -84,6 +87,23 @@ def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any
         step = global_method if isinstance(global_method, str) else clone(global_method)
         return build_chain(step, [coarse])
     return build_chain(None, [PointToPlaneICP()])
+
+
+def _screening_step(step):
+    """The screening's global step: one whose default matcher keeps at most
+    ``max_matches`` matches found both ways (the consensus's 4000) searches, in each
+    direction, from :data:`SCREENING_QUERIES` of that count spread over the scan. A
+    scan at the common resolution holds several times the points a pair's global cloud
+    does (the overlap and the edges need them), and the matches beyond the cap were
+    thrown away. A step with its own matcher, or another kind, is left as it is."""
+    default = getattr(step, "default_matcher", None)
+    if SCREENING_QUERIES is None or default is None or getattr(step, "matcher", 0) is not None:
+        return step
+    matcher = default()
+    if not matcher.both_directions or matcher.max_matches is None:
+        return step
+    queries = max(3, int(matcher.max_matches * SCREENING_QUERIES))
+    return clone(step).set_params(matcher=matcher.set_params(max_queries=queries))
 
 
 def _pair_context(source, target, prepared_source, prepared_target, settings, seed, views=None):
@@ -430,6 +450,7 @@ def register_multiway(
     # The screening step, resolved and checked as register() does (copied per pair),
     # without register()'s FPFH fallback: the rooms were chosen with the model alone.
     global_method = build_chain(global_method, None, worker, fpfh_fallback=False)[0][1]
+    global_method = _screening_step(global_method)
     if voxel_size == "auto":
         voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
     else:

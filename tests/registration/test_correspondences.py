@@ -148,6 +148,45 @@ def test_matches_both_ways_are_the_two_calls_matches():
         correspondences_both_ways(a, b, k=0)
 
 
+def test_matches_both_ways_from_a_spread_of_queries():
+    """With ``max_queries``, each direction searches from that many of its points,
+    spread evenly by index, against every point of the other cloud: the matches of
+    those rows as a plain search of them finds, indexed in the whole cloud; a cloud no
+    larger than ``max_queries`` searches from every point."""
+    from o3d_rpointhop.registration.correspondences import (
+        correspondences_both_ways,
+        k_best_correspondences,
+    )
+
+    a, b = _tied_descriptors(np.float32, 300, 250, seed=5)
+    rows = np.unique(np.linspace(0, 299, 100).astype(np.int64))
+    columns = np.unique(np.linspace(0, 249, 100).astype(np.int64))
+    for ratio in (None, 0.9):
+        forward, backward = correspondences_both_ways(a, b, max_ratio=ratio, max_queries=100)
+        for got, (queries, refs, chosen) in (
+            (forward, (a, b, rows)),
+            (backward, (b, a, columns)),
+        ):
+            want = find_correspondences(queries[chosen], refs, max_ratio=ratio)
+            np.testing.assert_array_equal(got.pairs[:, 0], chosen[want.pairs[:, 0]])
+            np.testing.assert_array_equal(got.pairs[:, 1], want.pairs[:, 1])
+            np.testing.assert_array_equal(got.distances, want.distances)
+            np.testing.assert_array_equal(got.ratios, want.ratios)
+    forward, _ = correspondences_both_ways(a, b, k=2, max_queries=100)
+    want = k_best_correspondences(a[rows], b, 2)
+    np.testing.assert_array_equal(forward.pairs[:, 0], rows[want.pairs[:, 0]])
+    np.testing.assert_array_equal(forward.pairs[:, 1], want.pairs[:, 1])
+    # Only the larger cloud is thinned; at or above both sizes nothing is.
+    forward, backward = correspondences_both_ways(a, b, max_queries=260)
+    assert len(np.unique(forward.pairs[:, 0])) <= 260 < 300
+    np.testing.assert_array_equal(backward.pairs, find_correspondences(b, a).pairs)
+    every = correspondences_both_ways(a, b, max_queries=300)
+    plain = correspondences_both_ways(a, b)
+    for got, want in zip(every, plain, strict=True):
+        np.testing.assert_array_equal(got.pairs, want.pairs)
+        np.testing.assert_array_equal(got.distances, want.distances)
+
+
 def test_shared_matches_answer_the_other_way_round_as_computing_it(monkeypatch):
     """Inside shared_matches(), matching two arrays the other way round reuses the
     first matching, swapped, and gives what computing it gives, to the bit; outside,

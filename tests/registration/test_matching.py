@@ -80,6 +80,12 @@ def test_the_cap_and_salient_points_bound_the_matches():
     assert all(tuple(p) in set(map(tuple, everything.pairs)) for p in capped.pairs)
     salient = Matcher(salient_share=0.5).match(a, b)
     assert 3 <= len(salient) < len(Matcher().match(a, b))
+    # Searching from 50 spread points each way: every match has one of them at the
+    # searching end (the source's rows forward, the target's backward).
+    thinned = Matcher(both_directions=True, max_queries=50).match(a, b)
+    rows = set(np.unique(np.linspace(0, 399, 50).astype(np.int64)).tolist())
+    assert 50 < len(thinned) <= 100
+    assert all(p[0] in rows or p[1] in rows for p in thinned.pairs.tolist())
 
 
 @pytest.mark.parametrize(
@@ -90,6 +96,8 @@ def test_the_cap_and_salient_points_bound_the_matches():
         ({"frame_turns": 4, "max_ratio": 0.8}, "frame_turns=4 cannot be combined"),
         ({"frame_turns": 3}, "frame_turns"),
         ({"max_matches": 2}, "max_matches"),
+        ({"max_queries": 100}, "max_queries needs both_directions"),
+        ({"max_queries": 100, "both_directions": True, "mutual_filter": True}, "max_queries"),
     ],
 )
 def test_bad_parameters_are_refused(params, message):

@@ -468,3 +468,22 @@ def test_every_left_out_scan_is_explained(tmp_path):
     loaded = MultiwayResult.load(path)
     assert (loaded.min_fitness, loaded.max_violation) == (0.3, 0.1)
     assert loaded.left_out() == why
+
+
+def test_the_screening_searches_from_half_the_consensus_cap():
+    """Scans of rooms are screened by the consensus searching, each way, from half its
+    cap of matches spread over the scan; a step with its own matcher, or RANSAC (whose
+    matcher keeps every match), is screened as given."""
+    from o3d_rpointhop import ConsensusGlobal, RANSACGlobal
+    from o3d_rpointhop.registration import Matcher, multiway
+
+    step = multiway._screening_step(ConsensusGlobal(n_seeds=100))
+    assert (
+        step.matcher.get_params()
+        == Matcher(both_directions=True, max_matches=4000, max_queries=2000).get_params()
+    )
+    assert step.n_seeds == 100
+    own = ConsensusGlobal(matcher=Matcher(both_directions=True, max_matches=100))
+    assert multiway._screening_step(own) is own
+    ransac = RANSACGlobal()
+    assert multiway._screening_step(ransac) is ransac

@@ -1,0 +1,151 @@
+"""Choose a setting of ``register_multiway`` on the training scenes' whole rooms.
+
+Every fragment of each chosen 3DMatch scene is rebuilt by ``register_multiway`` with
+its defaults (the model chosen from the scans: the scene model facing the sensors) but
+the setting, at each candidate value, and scored on the scene's ground-truth pairs as
+the rooms benchmark scores them (``evaluation/rooms.py``: gt.log pairs of 3DMatch and
+3DLoMatch, official RMSE test), with the time of each rebuild. Settings:
+
+- ``max_violation``: the free-space limit of an edge (``none``: no check);
+- ``screening_queries``: the share of the consensus's cap of matches each direction of
+  a screening searches from (``multiway.SCREENING_QUERIES``; ``none``: every point).
+
+Writes ``<stem>.json`` / ``.md`` and their timings to ``--output``::
+
+    python benchmarks/rooms_selection.py --setting screening_queries \\
+        --candidates none,0.375,0.5,0.75 --stem screening_queries_selection
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from o3d_rpointhop import RPointHopTransformer, register_multiway
+from o3d_rpointhop.datasets.threedmatch import threedmatch_root
+from o3d_rpointhop.evaluation.provenance import descriptor_provenance
+from o3d_rpointhop.evaluation.report import write_split
+from o3d_rpointhop.evaluation.rooms import pairs_registered, scene_data
+from o3d_rpointhop.evaluation.scene_models import TRAINING_SCENES
+from o3d_rpointhop.registration import multiway
+
+RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+SETTINGS = {
+    "max_violation": ("none", "0.05", "0.08", "0.1", "0.12", "0.15"),
+    "screening_queries": ("none", "0.375", "0.5", "0.75"),
+}
+
+
+def _rebuild(setting: str, value: float | None, points, n_jobs: int):
+    """``register_multiway(points)`` with ``setting`` at ``value``."""
+    if setting == "max_violation":
+        return register_multiway(points, max_violation=value, n_jobs=n_jobs, progress=False)
+    default = multiway.SCREENING_QUERIES
+    multiway.SCREENING_QUERIES = value  # applied to the step before the pairs are sent
+    try:
+        return register_multiway(points, n_jobs=n_jobs, progress=False)
+    finally:
+        multiway.SCREENING_QUERIES = default
+
+
+def _markdown(out: dict, setting: str) -> str:
+    candidates = out["candidates"]
+    lines = [
+        f"# register_multiway's {setting}, training scenes",
+        "",
+        "Ground-truth pairs registered (gt.log of 3DMatch and 3DLoMatch, RMSE < 0.2 m) and "
+        f"fragments placed, per candidate {setting}.",
+        "",
+        "| scene | " + " | ".join(candidates) + " |",
+        "|---|" + "---|" * len(candidates),
+    ]
+    for scene, entry in out["scenes"].items():
+        cells = [
+            f"{entry['runs'][c]['gt_pairs_registered']} / {entry['gt_pairs']} "
+            f"({entry['runs'][c]['placed']} of {entry['fragments']} placed)"
+            for c in candidates
+        ]
+        lines.append(f"| {scene} | " + " | ".join(cells) + " |")
+    totals = out["totals"]
+    lines.append(
+        "| **all** | "
+        + " | ".join(f"{totals[c]['registered']} / {totals[c]['gt_pairs']}" for c in candidates)
+        + " |"
+    )
+    return "\n".join(lines) + "\n"
+
+
+def _timings_markdown(out: dict, setting: str) -> str:
+    candidates = out["candidates"]
+    lines = [
+        f"# register_multiway's {setting}, training scenes: seconds per rebuild",
+        "",
+        "| scene | " + " | ".join(candidates) + " |",
+        "|---|" + "---|" * len(candidates),
+    ]
+    for scene, entry in out["scenes"].items():
+        cells = [f"{entry['runs'][c]['seconds']}" for c in candidates]
+        lines.append(f"| {scene} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None, setting: str | None = None, stem: str | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    if setting is None:
+        parser.add_argument("--setting", choices=sorted(SETTINGS), required=True)
+        parser.add_argument("--stem", default=None)
+    parser.add_argument("--scenes", default=",".join(TRAINING_SCENES))
+    parser.add_argument("--candidates", default=None)
+    parser.add_argument("--data", default=None)
+    parser.add_argument("--n-jobs", type=int, default=-1)
+    parser.add_argument("--output", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    setting = setting or args.setting
+    stem = stem or getattr(args, "stem", None) or f"{setting}_selection"
+    root = threedmatch_root(args.data)
+    wanted = [s for s in args.scenes.split(",") if s]
+    scenes = [
+        p.name for p in sorted((root / "fragments").iterdir()) if any(w in p.name for w in wanted)
+    ]
+    held = [s for s in scenes if s not in TRAINING_SCENES]
+    if held:
+        parser.error(f"choose on training scenes only, not {held}")
+    candidates = [c.strip() for c in (args.candidates or ",".join(SETTINGS[setting])).split(",")]
+    out = {"setting": setting, "candidates": candidates, "scenes": {}}
+    totals = {c: [0, 0] for c in candidates}
+    for scene in scenes:
+        ids, points, truth = scene_data(root, scene)
+        entry = {"gt_pairs": len(truth), "fragments": len(ids), "runs": {}}
+        for candidate in candidates:
+            value = None if candidate == "none" else float(candidate)
+            start = time.perf_counter()
+            result = _rebuild(setting, value, points, args.n_jobs)
+            poses = dict(zip(ids, result.poses, strict=True))
+            row = {
+                "gt_pairs_registered": pairs_registered(poses, truth),
+                "placed": sum(p is not None for p in result.poses),
+                "edges": len(result.edges),
+                "model": result.model["model"],
+                "seconds": round(time.perf_counter() - start, 1),
+            }
+            entry["runs"][candidate] = row
+            totals[candidate][0] += row["gt_pairs_registered"]
+            totals[candidate][1] += len(truth)
+            print(scene, candidate, json.dumps(row), flush=True)
+        out["scenes"][scene] = entry
+    out["totals"] = {c: {"registered": t[0], "gt_pairs": t[1]} for c, t in totals.items()}
+    out["provenance"] = descriptor_provenance(
+        {f"rpointhop-{m}": RPointHopTransformer.pretrained(m) for m in ("object", "scene")}
+    )
+    text = _markdown(out, setting)
+    write_split(
+        out, args.output, stem, lambda kept: text, lambda timed: _timings_markdown(timed, setting)
+    )
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
