@@ -99,8 +99,8 @@ class Matcher(BaseEstimator):
         its cloud's points, spread evenly by index, each against every point of the
         other cloud (``None``: from every point). For clouds several times larger than
         the matches kept (``max_matches``), the search then costs what the kept
-        matches need; :func:`~o3d_rpointhop.register_multiway` screens scans of rooms
-        with half the consensus's cap in each direction (docs/multiway.md).
+        matches need (tried as ``register_multiway``'s screening of rooms and not kept:
+        docs/multiway.md).
 
     See Also
     --------

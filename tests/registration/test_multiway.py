@@ -470,13 +470,17 @@ def test_every_left_out_scan_is_explained(tmp_path):
     assert loaded.left_out() == why
 
 
-def test_the_screening_searches_from_half_the_consensus_cap():
-    """Scans of rooms are screened by the consensus searching, each way, from half its
-    cap of matches spread over the scan; a step with its own matcher, or RANSAC (whose
-    matcher keeps every match), is screened as given."""
+def test_the_screening_can_search_from_a_share_of_the_consensus_cap(monkeypatch):
+    """By default a screening step is the one given; with ``SCREENING_QUERIES`` the
+    consensus searches, each way, from that share of its cap of matches spread over the
+    scan, and a step with its own matcher, or RANSAC (whose matcher keeps every match),
+    is still screened as given."""
     from o3d_rpointhop import ConsensusGlobal, RANSACGlobal
     from o3d_rpointhop.registration import Matcher, multiway
 
+    plain = ConsensusGlobal()
+    assert multiway._screening_step(plain) is plain
+    monkeypatch.setattr(multiway, "SCREENING_QUERIES", 0.5)
     step = multiway._screening_step(ConsensusGlobal(n_seeds=100))
     assert (
         step.matcher.get_params()
