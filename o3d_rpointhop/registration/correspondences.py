@@ -508,9 +508,10 @@ def correspondences_both_ways(
     (:func:`nearest_both_ways`): the same matches as the two calls, for half the
     products.
 
-    With ``max_queries``, a direction whose clouds has more points searches from that
-    many of them, spread evenly by index, each against every point of the other cloud
-    (for a caller that keeps a few thousand matches of clouds several times larger).
+    With ``max_queries``, a direction whose query cloud has more points than that
+    searches from that many of them, spread evenly by index, each against every point
+    of the other cloud (for a caller that keeps a few thousand matches of clouds
+    several times larger).
 
     Returns
     -------

@@ -99,8 +99,8 @@ class Matcher(BaseEstimator):
         its cloud's points, spread evenly by index, each against every point of the
         other cloud (``None``: from every point). For clouds several times larger than
         the matches kept (``max_matches``), the search then costs what the kept
-        matches need (tried as ``register_multiway``'s screening of rooms and not kept:
-        docs/multiway.md).
+        matches need; the matches differ, and on rooms' screenings that moved which
+        pairs were found (docs/multiway.md, "Searching from half the cap").
 
     See Also
     --------

@@ -71,10 +71,8 @@ RETRIEVED_NEIGHBOURS = 6
 #: Up to this many scans, every pair is a candidate.
 ALL_PAIRS_UP_TO = 12
 #: A screening whose matcher keeps at most ``max_matches`` matches found both ways
-#: searches from this share of that count in each direction; None (the default): from
-#: every point. 0.5 was chosen on the training rooms (316 against 312 gt pairs, about
-#: a tenth faster) and taken back after its one held-out run (333 against 354 gt
-#: pairs: docs/multiway.md, "Searching from half the cap").
+#: searches from this share of that count in each direction; None: from every point
+#: (what a share does to the rooms: docs/multiway.md, "Searching from half the cap").
 SCREENING_QUERIES = None
 
 
