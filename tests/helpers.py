@@ -173,6 +173,31 @@ def partial_views(n_scans: int, seed: int = 0, n_points: int = 2400):
     return scans, poses
 
 
+def synthetic_scene(root, name: str, ids=(0, 1, 2), seed: int = 5) -> None:
+    """:func:`partial_views` of one object laid out under ``root`` as a 3DMatch scene:
+    ``fragments/<name>/cloud_bin_<id>.ply`` and, under ``benchmarks/3DMatch/<name>``, a
+    gt.log (fragment j into fragment i) and a gt.info for each pair of consecutive ids."""
+    import open3d as o3d
+
+    scans, truth = partial_views(len(ids), seed=seed)
+    folder = Path(root) / "fragments" / name
+    folder.mkdir(parents=True)
+    for k, scan in zip(ids, scans, strict=True):
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scan))
+        o3d.io.write_point_cloud(str(folder / f"cloud_bin_{k}.ply"), cloud)
+    gt = Path(root) / "benchmarks" / "3DMatch" / name
+    gt.mkdir(parents=True)
+    log = {
+        (ids[n], ids[n + 1]): np.linalg.inv(truth[n]) @ truth[n + 1] for n in range(len(ids) - 1)
+    }
+    for file, records in (("gt.log", log), ("gt.info", {pair: np.eye(6) for pair in log})):
+        lines = []
+        for (i, j), matrix in records.items():
+            lines.append(f"{i} {j} 3")
+            lines += [" ".join(f"{v:.12g}" for v in row) for row in matrix]
+        (gt / file).write_text("\n".join(lines) + "\n")
+
+
 @contextmanager
 def dask_cluster():
     """A Dask ``LocalCluster`` of two single-threaded worker processes and its client
