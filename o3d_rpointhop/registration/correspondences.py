@@ -30,6 +30,7 @@ __all__ = [
     "nearest_descriptors",
     "salient",
     "shared_matches",
+    "spread_indices",
     "turned_correspondences",
     "unit_rows",
 ]
@@ -244,8 +245,8 @@ class _ColumnCandidates:
         self.values = np.full((n_references, n), np.inf, dtype=queries.dtype)
         self.rows = np.zeros((n_references, n), dtype=np.int64)
         self.kept = np.zeros(n_references, dtype=np.int64)
-        # Each column's largest kept value: infinite until its list is full; no column
-        # keeps any when every query is a candidate.
+        # The values' last column, contiguous for the kernel's vectorised pass; minus
+        # infinity when every query is a candidate (no column keeps any).
         self.last = np.full(n_references, -np.inf if self.every else np.inf, dtype=queries.dtype)
 
     def add(self, block, ref_sq, start: int, n_row: int) -> np.ndarray:
@@ -348,11 +349,11 @@ def _candidates_both_ways(
     row's ``n_row`` smallest of ``-2 q.r + |r|^2`` (returned, ``(rows, n_row)``; none
     when ``n_row`` is 0) and, into the running lists ``col_values`` / ``col_rows`` /
     ``col_kept``, each column's ``n_col`` smallest of ``-2 q.r + |q|^2`` (none when 0;
-    ``col_last``: each column's largest kept value, infinite until its list is full,
-    minus infinity when no column keeps any). ``minus_two`` holds -2 in the block's
-    dtype, so each value is computed in that dtype as the numpy passes compute it. Both
-    keep a newcomer after the ones it does not beat: value, then index, as
-    :func:`_smallest`.
+    ``col_last``: a contiguous copy of ``col_values``' last column, which is infinite
+    until a list is full, or minus infinity when no column keeps any). ``minus_two``
+    holds -2 in the block's dtype, so each value is computed in that dtype as the numpy
+    passes compute it. Both keep a newcomer after the ones it does not beat: value,
+    then index, as :func:`_smallest`.
 
     Few entries of a row can enter either list, so each row is first marked where one
     might, in a loop the compiler vectorises: a column's entry when it beats the
@@ -397,10 +398,10 @@ def _candidates_both_ways(
                     if kept < n_row or v < best[n_row - 1]:
                         kept = insert_ranked(best, out[i], kept, v, j)
                 if mark & 2:
-                    c = insert_ranked(col_values[j], col_rows[j], col_kept[j], g + own, first + i)
-                    col_kept[j] = c
-                    if c == n_col:
-                        col_last[j] = col_values[j, n_col - 1]
+                    col_kept[j] = insert_ranked(
+                        col_values[j], col_rows[j], col_kept[j], g + own, first + i
+                    )
+                    col_last[j] = col_values[j, n_col - 1]
     return out
 
 
@@ -518,7 +519,9 @@ def correspondences_both_ways(
     forward, backward : Correspondences
         Source to target; target to source (pairs ``(target index, source index)``).
     """
-    k = _checked_k(k)
+    k = _checked_count(k, "k")
+    if max_queries is not None:
+        max_queries = _checked_count(max_queries, "max_queries")
     if k > 1 and max_ratio is not None:
         raise ValueError("max_ratio is defined on the nearest descriptor alone: not with k > 1")
     memo = _SHARED.get()
@@ -533,9 +536,10 @@ def correspondences_both_ways(
     return found
 
 
-def _spread(n: int, count: int | None) -> np.ndarray | None:
-    """``count`` indices of ``n`` spread evenly (None when ``count`` is None or not
-    below ``n``: every index)."""
+def spread_indices(n: int, count: int | None) -> np.ndarray | None:
+    """``count`` of the indices ``0 .. n - 1``, spread evenly, ascending (a matcher's cap
+    and its thinned queries); None when ``count`` is None or not below ``n``: every
+    index."""
     if count is None or count >= n:
         return None
     return np.unique(np.linspace(0, n - 1, count).astype(np.int64))
@@ -559,7 +563,7 @@ def _one_way(queries, references, rows, max_ratio, k: int) -> Correspondences:
 def _both_ways(source_features, target_features, max_ratio, k: int, max_queries=None):
     """:func:`correspondences_both_ways`, computed."""
     src, tgt = _feature_pair(source_features, target_features)
-    rows, columns = _spread(len(src), max_queries), _spread(len(tgt), max_queries)
+    rows, columns = spread_indices(len(src), max_queries), spread_indices(len(tgt), max_queries)
     if rows is not None or columns is not None:
         forward = _one_way(src, tgt, rows, max_ratio, k)
         return forward, _one_way(tgt, src, columns, max_ratio, k)
@@ -616,18 +620,18 @@ def k_best_correspondences(source_features, target_features, k: int) -> Correspo
         Sorted by source index, then nearest first; each match's ratio is its distance
         over the next nearest's.
     """
-    k = _checked_k(k)
+    k = _checked_count(k, "k")
     src, tgt = _feature_pair(source_features, target_features)
     k = min(k, len(tgt))
     idx, dist = nearest_descriptors(src, tgt, k=k + 1)
     return _k_best(idx, dist, k)
 
 
-def _checked_k(k) -> int:
-    """A k-best count: an int of at least 1, else a clear error."""
-    if isinstance(k, bool) or not isinstance(k, Integral) or k < 1:
-        raise ValueError(f"k must be an int >= 1, got {k!r}")
-    return int(k)
+def _checked_count(value, name: str) -> int:
+    """A count (``k``, ``max_queries``): an int of at least 1, else a clear error."""
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+        raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+    return int(value)
 
 
 def _k_best(idx, dist, k: int) -> Correspondences:

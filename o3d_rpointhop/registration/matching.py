@@ -28,6 +28,7 @@ from .correspondences import (
     find_correspondences,
     k_best_correspondences,
     salient,
+    spread_indices,
     turned_correspondences,
     unit_rows,
 )
@@ -284,7 +285,7 @@ class Matcher(BaseEstimator):
             if self.cap == "distance":
                 keep = np.sort(np.argsort(corr.distances, kind="stable")[: self.max_matches])
             else:  # evenly by index: no region is favoured for its similar descriptors
-                keep = np.unique(np.linspace(0, len(corr) - 1, self.max_matches).astype(np.int64))
+                keep = spread_indices(len(corr), self.max_matches)
             corr = corr.rows(keep)
         return corr
 

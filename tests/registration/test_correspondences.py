@@ -180,6 +180,9 @@ def test_matches_both_ways_from_a_spread_of_queries():
     forward, backward = correspondences_both_ways(a, b, max_queries=260)
     assert len(np.unique(forward.pairs[:, 0])) <= 260 < 300
     np.testing.assert_array_equal(backward.pairs, find_correspondences(b, a).pairs)
+    for bad in (0, 2.5, True):
+        with pytest.raises(ValueError, match="max_queries must be an int"):
+            correspondences_both_ways(a, b, max_queries=bad)
     every = correspondences_both_ways(a, b, max_queries=300)
     plain = correspondences_both_ways(a, b)
     for got, want in zip(every, plain, strict=True):
