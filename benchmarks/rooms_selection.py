@@ -50,45 +50,50 @@ def _rebuild(setting: str, value: float | None, points, n_jobs: int):
         multiway.SCREENING_QUERIES = default
 
 
-def _markdown(out: dict, setting: str) -> str:
+def _table(out: dict, heading: list[str], cell) -> str:
+    """A table of every scene by candidate under ``heading``; ``cell(entry, run)`` is a
+    scene's cell for one candidate's run."""
     candidates = out["candidates"]
     lines = [
-        f"# register_multiway's {setting}, training scenes",
-        "",
-        "Ground-truth pairs registered (gt.log of 3DMatch and 3DLoMatch, RMSE < 0.2 m) and "
-        f"fragments placed, per candidate {setting}.",
-        "",
+        *heading,
         "| scene | " + " | ".join(candidates) + " |",
         "|---|" + "---|" * len(candidates),
     ]
     for scene, entry in out["scenes"].items():
-        cells = [
-            f"{entry['runs'][c]['gt_pairs_registered']} / {entry['gt_pairs']} "
-            f"({entry['runs'][c]['placed']} of {entry['fragments']} placed)"
-            for c in candidates
-        ]
+        cells = [cell(entry, entry["runs"][c]) for c in candidates]
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
-    totals = out["totals"]
-    lines.append(
-        "| **all** | "
-        + " | ".join(f"{totals[c]['registered']} / {totals[c]['gt_pairs']}" for c in candidates)
-        + " |"
-    )
     return "\n".join(lines) + "\n"
+
+
+def _markdown(out: dict, setting: str) -> str:
+    totals = out["totals"]
+    text = _table(
+        out,
+        [
+            f"# register_multiway's {setting}, training scenes",
+            "",
+            "Ground-truth pairs registered (gt.log of 3DMatch and 3DLoMatch, RMSE < 0.2 m) "
+            f"and fragments placed, per candidate {setting}.",
+            "",
+        ],
+        lambda entry, run: (
+            f"{run['gt_pairs_registered']} / {entry['gt_pairs']} "
+            f"({run['placed']} of {entry['fragments']} placed)"
+        ),
+    )
+    return (
+        text
+        + "| **all** | "
+        + " | ".join(
+            f"{totals[c]['registered']} / {totals[c]['gt_pairs']}" for c in out["candidates"]
+        )
+        + " |\n"
+    )
 
 
 def _timings_markdown(out: dict, setting: str) -> str:
-    candidates = out["candidates"]
-    lines = [
-        f"# register_multiway's {setting}, training scenes: seconds per rebuild",
-        "",
-        "| scene | " + " | ".join(candidates) + " |",
-        "|---|" + "---|" * len(candidates),
-    ]
-    for scene, entry in out["scenes"].items():
-        cells = [f"{entry['runs'][c]['seconds']}" for c in candidates]
-        lines.append(f"| {scene} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    heading = [f"# register_multiway's {setting}, training scenes: seconds per rebuild", ""]
+    return _table(out, heading, lambda entry, run: f"{run['seconds']}")
 
 
 def main(argv=None, setting: str | None = None, stem: str | None = None) -> int:
