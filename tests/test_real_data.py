@@ -176,7 +176,6 @@ def test_3dmatch_benchmark_per_scene_and_overlap_plot(shared_data, tmp_path):
         run_3dmatch(["icp"], data=shared_data, scenes=["nowhere"], progress=False)
 
 
-@pytest.mark.slow
 def _placed_within_2_deg_2_mm(records: list[dict]) -> set[str]:
     """The scans of a bunny-benchmark protocol's records placed within 2 deg and 2 mm."""
     return {
@@ -186,6 +185,7 @@ def _placed_within_2_deg_2_mm(records: list[dict]) -> set[str]:
     }
 
 
+@pytest.mark.slow
 def test_bunny_benchmark_places_every_scan_sharing_a_fifth_with_bun000(shared_data):
     """The bunny benchmark's two protocols through register()'s object path: every scan
     whose overlap with bun000 is above a fifth placed within 2 deg and 2 mm (issue
@@ -209,6 +209,7 @@ def test_bunny_benchmark_places_every_scan_sharing_a_fifth_with_bun000(shared_da
         run_bunny(["nowhere"], ["icp"], data=shared_data, progress=False)
 
 
+@pytest.mark.slow
 def test_bunny_benchmark_places_the_dragon_scans_sharing_half_with_the_first(shared_data):
     """The dragon's protocol through register()'s object path: the six scans against
     dragonStandRight_0, each overlap the share the true pose brings within 2 mm, and
