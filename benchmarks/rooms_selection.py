@@ -8,7 +8,10 @@ the rooms benchmark scores them (``evaluation/rooms.py``: gt.log pairs of 3DMatc
 
 - ``max_violation``: the free-space limit of an edge (``none``: no check);
 - ``screening_queries``: the share of the consensus's cap of matches each direction of
-  a screening searches from (``multiway.SCREENING_QUERIES``; ``none``: every point).
+  a screening searches from (``multiway.SCREENING_QUERIES``; ``none``: every point);
+- ``screening``: ``axes/hypotheses``, the scene model's leading axes the scans are
+  described on (``multiway.SCREENING_AXES``) and the hypotheses each screening
+  verifies (``multiway.SCREENING_HYPOTHESES``).
 
 Writes ``<stem>.json`` / ``.md`` and their timings to ``--output``::
 
@@ -35,19 +38,34 @@ RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
 SETTINGS = {
     "max_violation": ("none", "0.05", "0.08", "0.1", "0.12", "0.15"),
     "screening_queries": ("none", "0.375", "0.5", "0.75"),
+    "screening": ("96/16", "96/8", "32/16", "32/8", "32/4", "16/8"),
 }
 
 
-def _rebuild(setting: str, value: float | None, points, n_jobs: int):
-    """``register_multiway(points)`` with ``setting`` at ``value``."""
+def _values(setting: str, candidate: str) -> dict:
+    """The module settings of ``multiway`` a candidate stands for."""
+    if setting == "screening":
+        axes, hypotheses = (int(v) for v in candidate.split("/"))
+        return {"SCREENING_AXES": {"scene": axes}, "SCREENING_HYPOTHESES": hypotheses}
+    value = None if candidate == "none" else float(candidate)
+    return {"SCREENING_QUERIES": value} if setting == "screening_queries" else {}
+
+
+def _rebuild(setting: str, candidate: str, points, n_jobs: int):
+    """``register_multiway(points)`` with ``setting`` at ``candidate``."""
     if setting == "max_violation":
+        value = None if candidate == "none" else float(candidate)
         return register_multiway(points, max_violation=value, n_jobs=n_jobs, progress=False)
-    default = multiway.SCREENING_QUERIES
-    multiway.SCREENING_QUERIES = value  # applied to the step before the pairs are sent
+    values = _values(setting, candidate)
+    defaults = {name: getattr(multiway, name) for name in values}
+    # Applied to the model and the step before the pairs are sent to the workers.
+    for name, value in values.items():
+        setattr(multiway, name, value)
     try:
         return register_multiway(points, n_jobs=n_jobs, progress=False)
     finally:
-        multiway.SCREENING_QUERIES = default
+        for name, value in defaults.items():
+            setattr(multiway, name, value)
 
 
 def _table(out: dict, heading: list[str], cell) -> str:
@@ -124,9 +142,8 @@ def main(argv=None, setting: str | None = None, stem: str | None = None) -> int:
         ids, points, truth = scene_data(root, scene)
         entry = {"gt_pairs": len(truth), "fragments": len(ids), "runs": {}}
         for candidate in candidates:
-            value = None if candidate == "none" else float(candidate)
             start = time.perf_counter()
-            result = _rebuild(setting, value, points, args.n_jobs)
+            result = _rebuild(setting, candidate, points, args.n_jobs)
             poses = dict(zip(ids, result.poses, strict=True))
             row = {
                 "gt_pairs_registered": pairs_registered(poses, truth),

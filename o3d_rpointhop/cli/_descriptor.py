@@ -115,20 +115,30 @@ def _rpointhop_from(section: dict[str, Any], registering: bool) -> Any:
 
 
 def chosen_descriptor(
-    section: dict[str, Any], viewpoints: Any, clouds: list[Any], names: list[str]
+    section: dict[str, Any],
+    viewpoints: Any,
+    clouds: list[Any],
+    names: list[str],
+    multiway: bool = False,
 ) -> tuple[Any, str | list, dict[str, Any]]:
     """The shipped model and viewpoints ``register(descriptor="auto")`` would use for
     ``clouds`` (a command whose model was left to the library: ``descriptor_from``
     gave None), on ``[descriptor]``'s threads; the viewpoints as the ``--viewpoints``
-    flag says them (``"none"`` for no sensor), and the choice, JSON-ready."""
+    flag says them (``"none"`` for no sensor), and the choice, JSON-ready. With
+    ``multiway``, the model on the axes ``register_multiway(descriptor="auto")`` gives
+    it (:func:`~o3d_rpointhop.registration.multiway.chosen_model`)."""
     from ..registration.model_choice import resolve_model
+    from ..registration.multiway import chosen_model
     from ._trust import log
 
     try:
         descriptor, views, choice = resolve_model("auto", viewpoints, clouds, names)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
+    if multiway:
+        descriptor, choice = chosen_model(descriptor, choice)
     if section.get("n_jobs") is not None:
         descriptor = descriptor.set_params(n_jobs=section["n_jobs"])
-    log.info("model: %s, viewpoints %s (%s)", choice.model, views, choice.reason)
+    axes = "" if choice.axes is None else f" on {choice.axes} axes"
+    log.info("model: %s%s, viewpoints %s (%s)", choice.model, axes, views, choice.reason)
     return descriptor, "none" if views is None else views, choice.as_dict()

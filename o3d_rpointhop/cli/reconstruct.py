@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     choice = None
     if descriptor is None:  # the model is chosen from the scans, as register_multiway() does
         descriptor, flags["viewpoints"], choice = chosen_descriptor(
-            section, options["viewpoints"], scans, args.scans
+            section, options["viewpoints"], scans, args.scans, multiway=True
         )
         options, record = reconstruct_options(config, flags, descriptor, section, args.sequential)
     try:

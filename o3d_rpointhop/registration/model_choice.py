@@ -122,6 +122,10 @@ class ModelChoice:
     room_scans : int
         How many of the clouds read as room scans.
     n_clouds : int
+    axes : int or None, default=None
+        The leading principal axes the model describes on, where the use sets them
+        (:func:`~o3d_rpointhop.registration.multiway.register_multiway` on rooms);
+        None: the model's own.
     """
 
     model: str
@@ -129,6 +133,7 @@ class ModelChoice:
     reason: str
     room_scans: int
     n_clouds: int
+    axes: int | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, with ``"chosen": "auto"``: what results and records store."""

@@ -22,10 +22,12 @@ one way is screened the other way too.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import logging
 import time
 import warnings
+from dataclasses import replace
 from numbers import Integral, Real
 from typing import Any
 
@@ -46,7 +48,7 @@ from .context import RegistrationContext
 from .correspondences import shared_matches
 from .defaults import default_descriptor, resolve_global_points
 from .free_space import free_space_violation
-from .model_choice import resolve_model
+from .model_choice import ModelChoice, resolve_model
 from .pipeline import RegistrationPipeline, build_chain
 from .pose_graph import largest_part, optimise, poses_from_tree, spanning_tree
 from .prepared import PreparedCloud, estimate_normals, prepare_cloud
@@ -74,6 +76,17 @@ ALL_PAIRS_UP_TO = 12
 #: searches from this share of that count in each direction; None: from every point
 #: (what a share does to the rooms: docs/multiway.md, "Searching from half the cap").
 SCREENING_QUERIES = None
+#: The leading principal axes the model ``descriptor="auto"`` chooses describes the scans
+#: on, by model (a model not named: its own axes). Matching grows with the width; on the
+#: training rooms the scene model's first 32 of its 96 axes, with
+#: :data:`SCREENING_HYPOTHESES`, registered as many ground-truth pairs in two thirds of
+#: the time (docs/multiway.md, "A lighter screening").
+SCREENING_AXES = {"scene": 32}
+#: Hypotheses a screening's consensus verifies when both scans' sensors are known and
+#: its ``n_hypotheses`` is ``"auto"`` (a pair's own default is
+#: :data:`~o3d_rpointhop.registration.steps.consensus.SENSOR_HYPOTHESES`); None: the
+#: step's own.
+SCREENING_HYPOTHESES = 8
 
 
 def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any = "ransac"):
@@ -90,13 +103,43 @@ def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any
     return build_chain(None, [PointToPlaneICP()])
 
 
-def _screening_step(step):
+def chosen_model(descriptor: Any, choice: ModelChoice) -> tuple[Any, ModelChoice]:
+    """The model ``descriptor="auto"`` chose (``descriptor``, as ``choice`` says), on the
+    axes :data:`SCREENING_AXES` gives it for rebuilding scans: a copy on those axes and
+    the choice saying so, or both as given.
+
+    Parameters
+    ----------
+    descriptor : RPointHopTransformer
+        The shipped model ``choice`` names.
+    choice : ModelChoice
+
+    Returns
+    -------
+    descriptor, choice
+    """
+    axes = SCREENING_AXES.get(choice.model)
+    if axes is None or getattr(descriptor, "n_components", None) == axes:
+        return descriptor, choice
+    # A shallow copy: the fitted arrays are shared, only the projection's width differs.
+    return copy.copy(descriptor).set_params(n_components=axes), replace(choice, axes=axes)
+
+
+def _screening_step(step, sensors: bool = False):
     """The screening's global step: with :data:`SCREENING_QUERIES` set, one whose
     default matcher keeps at most ``max_matches`` matches found both ways (the
     consensus's 4000) searches, in each direction, from that share of the count spread
     over the scan (a scan at the common resolution holds several times the points a
-    pair's global cloud does, and the matches beyond the cap are thrown away). A step
-    with its own matcher, another kind, or no share set: the step given."""
+    pair's global cloud does, and the matches beyond the cap are thrown away); with
+    every scan's sensor known (``sensors``), a consensus left to choose its hypotheses
+    verifies :data:`SCREENING_HYPOTHESES`. A step with its own matcher and hypotheses,
+    another kind, or no setting: the step given."""
+    if (
+        sensors
+        and SCREENING_HYPOTHESES is not None
+        and getattr(step, "n_hypotheses", None) == "auto"
+    ):
+        step = clone(step).set_params(n_hypotheses=SCREENING_HYPOTHESES)
     default = getattr(step, "default_matcher", None)
     if SCREENING_QUERIES is None or default is None or getattr(step, "matcher", 0) is not None:
         return step
@@ -355,7 +398,9 @@ def register_multiway(
         it (:func:`~o3d_rpointhop.registration.model_choice.choose_model`): the scene
         model, facing a sensor at each scan's origin, when at least half of the scans
         read as rooms scanned from their origin, else the one-hop object model;
-        ``result.model`` says which and why. A name: that shipped model; ``None``: the
+        ``result.model`` says which and why. The scene model chosen so describes on
+        its leading :data:`SCREENING_AXES` (32 of 96) principal axes: matching costs
+        less, as many rooms' pairs register. A name: that shipped model; ``None``: the
         object model (``pretrained("object")``); an ``FPFHTransformer`` or any fitted
         descriptor works the same way. Each scan is described once. Pairs are screened
         with the global step the descriptor states
@@ -372,7 +417,10 @@ def register_multiway(
         The step that screens each candidate pair: ``"auto"`` (the one the descriptor
         states, as above), a name of :data:`~o3d_rpointhop.registration.GLOBAL_METHODS`
         (``"ransac"``, ``"consensus"``, ...) or a configured step such as
-        ``RANSACGlobal(max_iteration=200_000)`` (copied for every pair).
+        ``RANSACGlobal(max_iteration=200_000)`` (copied for every pair). With every
+        scan's sensor known, a consensus left to choose its hypotheses
+        (``n_hypotheses="auto"``) verifies :data:`SCREENING_HYPOTHESES` (8) per
+        pair instead of a pair's 16.
     voxel_size : float or "auto", default="auto"
         The common resolution, as ``register()``'s ``voxel_size`` is a pair's: every
         distance of the settings is a multiple of it. ``"auto"``: the coarsest any scan
@@ -431,6 +479,8 @@ def register_multiway(
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
     points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
     descriptor, viewpoints, choice = resolve_model(descriptor, viewpoints, points)
+    if choice is not None:
+        descriptor, choice = chosen_model(descriptor, choice)
     views = as_viewpoints(viewpoints, len(points))
     n = len(points)
     seed = renamed_seed(random_state, seed, "register_multiway")
@@ -451,7 +501,7 @@ def register_multiway(
     # The screening step, resolved and checked as register() does (copied per pair),
     # without register()'s FPFH fallback: the rooms were chosen with the model alone.
     global_method = build_chain(global_method, None, worker, fpfh_fallback=False)[0][1]
-    global_method = _screening_step(global_method)
+    global_method = _screening_step(global_method, all(v is not None for v in views))
     if voxel_size == "auto":
         voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
     else:

@@ -42,3 +42,18 @@ def test_each_candidate_is_measured_and_recorded(rooms_selection, tmp_path):
         out / "picked.md"
     ).read_text()
     assert multiway.SCREENING_QUERIES is None
+
+
+def test_a_screening_candidate_sets_the_axes_and_hypotheses(rooms_selection, monkeypatch):
+    """``axes/hypotheses`` is applied to the module for the rebuild only."""
+    seen = {}
+
+    def rebuild(points, **kwargs):
+        seen.update(axes=multiway.SCREENING_AXES, hypotheses=multiway.SCREENING_HYPOTHESES)
+        return "rebuilt"
+
+    monkeypatch.setattr(rooms_selection, "register_multiway", rebuild)
+    before = (dict(multiway.SCREENING_AXES), multiway.SCREENING_HYPOTHESES)
+    assert rooms_selection._rebuild("screening", "16/4", [], 1) == "rebuilt"
+    assert seen == {"axes": {"scene": 16}, "hypotheses": 4}
+    assert (multiway.SCREENING_AXES, multiway.SCREENING_HYPOTHESES) == before

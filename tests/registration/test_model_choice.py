@@ -149,3 +149,42 @@ def test_multiway_records_the_choice(tmp_path):
     result.save(tmp_path / "m.json")
     assert MultiwayResult.load(tmp_path / "m.json").model == result.model
     assert register_multiway(scans, "object").model is None
+
+
+def test_multiway_describes_rooms_on_the_screening_axes(monkeypatch):
+    """``register_multiway`` with the model left to it describes room scans with the
+    scene model on its leading ``SCREENING_AXES`` axes and records them; a model named
+    keeps its own axes, and the shipped model is left as it was."""
+    from o3d_rpointhop.registration import multiway
+
+    widths = []
+    prepare = multiway._prepare_scan
+
+    def spy(index, points, voxel, worker, *rest):
+        widths.append(worker.n_components)
+        return prepare(index, points, voxel, worker, *rest)
+
+    monkeypatch.setattr(multiway, "_prepare_scan", spy)
+    scans = [room_scan(s, n=1500) for s in range(2)]
+    chosen = register_multiway(scans)
+    axes = multiway.SCREENING_AXES["scene"]
+    assert chosen.model["model"] == "scene" and chosen.model["axes"] == axes
+    assert widths == [axes, axes]
+    assert RPointHopTransformer.pretrained("scene").n_components == 96
+    widths.clear()
+    named = register_multiway(scans, "scene", viewpoints="origin")
+    assert named.model is None and widths == [96, 96]
+
+
+def test_the_chosen_model_is_narrowed_only_where_a_width_is_set():
+    from o3d_rpointhop.registration.multiway import chosen_model
+
+    scene = RPointHopTransformer.pretrained("scene")
+    choice = ModelChoice("scene", "origin", "rooms", 2, 2)
+    narrowed, said = chosen_model(scene, choice)
+    assert narrowed is not scene and scene.n_components == 96
+    assert narrowed.n_components == 32 and said.axes == 32 and said.as_dict()["axes"] == 32
+    assert narrowed.transform(room_scan(n=400), viewpoints="origin").shape == (400, 32)
+    obj = RPointHopTransformer.pretrained("object")
+    kept = ModelChoice("object", None, "objects", 0, 2)
+    assert chosen_model(obj, kept) == (obj, kept)

@@ -491,3 +491,23 @@ def test_the_screening_can_search_from_a_share_of_the_consensus_cap(monkeypatch)
     assert multiway._screening_step(own) is own
     ransac = RANSACGlobal()
     assert multiway._screening_step(ransac) is ransac
+
+
+def test_the_screening_verifies_fewer_hypotheses_with_the_sensors_known(monkeypatch):
+    """With every scan's sensor known, a consensus left to choose its hypotheses
+    screens with ``SCREENING_HYPOTHESES``; one told how many, one without sensors, and
+    RANSAC are screened as given, and None leaves every step as it is."""
+    from o3d_rpointhop import ConsensusGlobal, RANSACGlobal
+    from o3d_rpointhop.registration import multiway
+
+    plain = ConsensusGlobal(n_seeds=100)
+    step = multiway._screening_step(plain, sensors=True)
+    assert step.n_hypotheses == multiway.SCREENING_HYPOTHESES == 8
+    assert step.n_seeds == 100 and plain.n_hypotheses == "auto"
+    assert multiway._screening_step(plain, sensors=False) is plain
+    told = ConsensusGlobal(n_hypotheses=4)
+    assert multiway._screening_step(told, sensors=True) is told
+    ransac = RANSACGlobal()
+    assert multiway._screening_step(ransac, sensors=True) is ransac
+    monkeypatch.setattr(multiway, "SCREENING_HYPOTHESES", None)
+    assert multiway._screening_step(plain, sensors=True) is plain
