@@ -38,7 +38,7 @@ RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
 SETTINGS = {
     "max_violation": ("none", "0.05", "0.08", "0.1", "0.12", "0.15"),
     "screening_queries": ("none", "0.375", "0.5", "0.75"),
-    "screening": ("96/16", "96/8", "32/16", "32/8", "32/4", "16/8"),
+    "screening": ("96/16", "96/8", "32/16", "32/12", "32/8"),
 }
 
 

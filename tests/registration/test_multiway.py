@@ -502,7 +502,7 @@ def test_the_screening_verifies_fewer_hypotheses_with_the_sensors_known(monkeypa
 
     plain = ConsensusGlobal(n_seeds=100)
     step = multiway._screening_step(plain, sensors=True)
-    assert step.n_hypotheses == multiway.SCREENING_HYPOTHESES == 8
+    assert step.n_hypotheses == multiway.SCREENING_HYPOTHESES == 12
     assert step.n_seeds == 100 and plain.n_hypotheses == "auto"
     assert multiway._screening_step(plain, sensors=False) is plain
     told = ConsensusGlobal(n_hypotheses=4)
