@@ -77,17 +77,15 @@ ALL_PAIRS_UP_TO = 12
 #: (what a share does to the rooms: docs/multiway.md, "Searching from half the cap").
 SCREENING_QUERIES = None
 #: The leading principal axes the model ``descriptor="auto"`` chooses describes the scans
-#: on, by model (a model not named: its own axes). Matching grows with the width; on the
-#: training rooms the scene model's first 32 of its 96 axes, with
-#: :data:`SCREENING_HYPOTHESES`, registered 316 against 312 ground-truth pairs, every
-#: fragment placed as before, in about four fifths of the time (docs/multiway.md, "A
-#: lighter screening").
-SCREENING_AXES = {"scene": 32}
+#: on, by model (a model not named: its own axes); e.g. ``{"scene": 32}``. Empty: every
+#: model on its own axes (what such a width and :data:`SCREENING_HYPOTHESES` do to the
+#: rooms: docs/multiway.md, "A lighter screening").
+SCREENING_AXES: dict[str, int] = {}
 #: Hypotheses a screening's consensus verifies when every scan's sensor is known and its
 #: ``n_hypotheses`` is ``"auto"`` (a pair's own default is
 #: :data:`~o3d_rpointhop.registration.steps.consensus.SENSOR_HYPOTHESES`, 16); None: the
 #: step's own.
-SCREENING_HYPOTHESES = 12
+SCREENING_HYPOTHESES: int | None = None
 
 
 def _pair_steps(settings: RegistrationSettings, screen: bool, global_method: Any = "ransac"):
@@ -399,9 +397,8 @@ def register_multiway(
         it (:func:`~o3d_rpointhop.registration.model_choice.choose_model`): the scene
         model, facing a sensor at each scan's origin, when at least half of the scans
         read as rooms scanned from their origin, else the one-hop object model;
-        ``result.model`` says which and why. The scene model chosen so describes on
-        its leading :data:`SCREENING_AXES` (32 of 96) principal axes: matching costs
-        less, as many rooms' pairs register. A name: that shipped model; ``None``: the
+        ``result.model`` says which and why (and the axes it describes on, with
+        :data:`SCREENING_AXES` set). A name: that shipped model; ``None``: the
         object model (``pretrained("object")``); an ``FPFHTransformer`` or any fitted
         descriptor works the same way. Each scan is described once. Pairs are screened
         with the global step the descriptor states
@@ -419,8 +416,8 @@ def register_multiway(
         states, as above), a name of :data:`~o3d_rpointhop.registration.GLOBAL_METHODS`
         (``"ransac"``, ``"consensus"``, ...) or a configured step such as
         ``RANSACGlobal(max_iteration=200_000)`` (copied for every pair). With every
-        scan's sensor known, a consensus left to choose its hypotheses
-        (``n_hypotheses="auto"``) verifies :data:`SCREENING_HYPOTHESES` (12) per
+        scan's sensor known and :data:`SCREENING_HYPOTHESES` set, a consensus left
+        to choose its hypotheses (``n_hypotheses="auto"``) verifies that many per
         pair instead of a pair's 16.
     voxel_size : float or "auto", default="auto"
         The common resolution, as ``register()``'s ``voxel_size`` is a pair's: every

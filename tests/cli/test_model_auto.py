@@ -81,14 +81,15 @@ def test_auto_is_refused_where_no_model_is_chosen(rooms, tmp_path, capsys):
     assert "--n-components applies to a named model" in capsys.readouterr().err
 
 
-def test_reconstruct_describes_rooms_on_the_screening_axes(rooms, tmp_path):
+def test_reconstruct_describes_rooms_on_the_screening_axes(rooms, tmp_path, monkeypatch):
     """``reconstruct`` with the model left to it rebuilds rooms as
-    ``register_multiway(scans)`` does: the scene model on its screening axes, said in
-    the poses file."""
-    from o3d_rpointhop.registration.multiway import SCREENING_AXES
+    ``register_multiway(scans)`` does: with ``SCREENING_AXES`` set, the scene model on
+    that many axes, said in the poses file."""
+    from o3d_rpointhop.registration import multiway
 
+    monkeypatch.setattr(multiway, "SCREENING_AXES", {"scene": 32})
     poses = tmp_path / "poses.json"
     out = ["-o", str(tmp_path / "room.ply"), "--poses", str(poses)]
     assert main(["reconstruct", *rooms, *out, "--n-jobs", "1"]) in (0, 3)
     model = json.loads(poses.read_text())["model"]
-    assert model["model"] == "scene" and model["axes"] == SCREENING_AXES["scene"]
+    assert model["model"] == "scene" and model["axes"] == 32

@@ -152,9 +152,10 @@ def test_multiway_records_the_choice(tmp_path):
 
 
 def test_multiway_describes_rooms_on_the_screening_axes(monkeypatch):
-    """``register_multiway`` with the model left to it describes room scans with the
-    scene model on its leading ``SCREENING_AXES`` axes and records them; a model named
-    keeps its own axes, and the shipped model is left as it was."""
+    """By default ``register_multiway`` describes room scans with the scene model on its
+    own 96 axes; with ``SCREENING_AXES`` set, the model left to it is described on that
+    many leading axes and the record says so, a model named keeps its own axes, and the
+    shipped model is left as it was."""
     from o3d_rpointhop.registration import multiway
 
     widths = []
@@ -166,21 +167,29 @@ def test_multiway_describes_rooms_on_the_screening_axes(monkeypatch):
 
     monkeypatch.setattr(multiway, "_prepare_scan", spy)
     scans = [room_scan(s, n=1500) for s in range(2)]
+    assert multiway.SCREENING_AXES == {}
+    plain = register_multiway(scans)
+    assert plain.model["model"] == "scene" and plain.model["axes"] is None
+    assert widths == [96, 96]
+    widths.clear()
+    monkeypatch.setattr(multiway, "SCREENING_AXES", {"scene": 32})
     chosen = register_multiway(scans)
-    axes = multiway.SCREENING_AXES["scene"]
-    assert chosen.model["model"] == "scene" and chosen.model["axes"] == axes
-    assert widths == [axes, axes]
+    assert chosen.model["model"] == "scene" and chosen.model["axes"] == 32
+    assert widths == [32, 32]
     assert RPointHopTransformer.pretrained("scene").n_components == 96
     widths.clear()
     named = register_multiway(scans, "scene", viewpoints="origin")
     assert named.model is None and widths == [96, 96]
 
 
-def test_the_chosen_model_is_narrowed_only_where_a_width_is_set():
+def test_the_chosen_model_is_narrowed_only_where_a_width_is_set(monkeypatch):
+    from o3d_rpointhop.registration import multiway
     from o3d_rpointhop.registration.multiway import chosen_model
 
     scene = RPointHopTransformer.pretrained("scene")
     choice = ModelChoice("scene", "origin", "rooms", 2, 2)
+    assert chosen_model(scene, choice) == (scene, choice)
+    monkeypatch.setattr(multiway, "SCREENING_AXES", {"scene": 32})
     narrowed, said = chosen_model(scene, choice)
     assert narrowed is not scene and scene.n_components == 96
     assert narrowed.n_components == 32 and said.axes == 32 and said.as_dict()["axes"] == 32

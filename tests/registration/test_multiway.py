@@ -493,16 +493,19 @@ def test_the_screening_can_search_from_a_share_of_the_consensus_cap(monkeypatch)
     assert multiway._screening_step(ransac) is ransac
 
 
-def test_the_screening_verifies_fewer_hypotheses_with_the_sensors_known(monkeypatch):
-    """With every scan's sensor known, a consensus left to choose its hypotheses
-    screens with ``SCREENING_HYPOTHESES``; one told how many, one without sensors, and
-    RANSAC are screened as given, and None leaves every step as it is."""
+def test_the_screening_can_verify_fewer_hypotheses_with_the_sensors_known(monkeypatch):
+    """With ``SCREENING_HYPOTHESES`` set and every scan's sensor known, a consensus
+    left to choose its hypotheses screens with that many; one told how many, one
+    without sensors, and RANSAC are screened as given, and None (the default) leaves
+    every step as it is."""
     from o3d_rpointhop import ConsensusGlobal, RANSACGlobal
     from o3d_rpointhop.registration import multiway
 
     plain = ConsensusGlobal(n_seeds=100)
+    assert multiway._screening_step(plain, sensors=True) is plain
+    monkeypatch.setattr(multiway, "SCREENING_HYPOTHESES", 12)
     step = multiway._screening_step(plain, sensors=True)
-    assert step.n_hypotheses == multiway.SCREENING_HYPOTHESES == 12
+    assert step.n_hypotheses == 12
     assert step.n_seeds == 100 and plain.n_hypotheses == "auto"
     assert multiway._screening_step(plain, sensors=False) is plain
     told = ConsensusGlobal(n_hypotheses=4)
