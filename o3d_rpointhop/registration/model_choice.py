@@ -123,9 +123,9 @@ class ModelChoice:
         How many of the clouds read as room scans.
     n_clouds : int
     axes : int or None, default=None
-        The leading principal axes the model describes on, where the use sets them
-        (:func:`~o3d_rpointhop.registration.multiway.register_multiway` on rooms);
-        None: the model's own.
+        The leading principal axes the model describes on when a rebuild narrows it
+        (:func:`~o3d_rpointhop.registration.multiway.chosen_model`); None: the model's
+        own.
     """
 
     model: str
