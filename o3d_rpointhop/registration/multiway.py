@@ -133,20 +133,24 @@ def _screening_step(step, sensors: bool = False):
     every scan's sensor known (``sensors``), a consensus left to choose its hypotheses
     verifies :data:`SCREENING_HYPOTHESES`. A step with its own matcher and hypotheses,
     another kind, or no setting: the step given."""
+    params = {}
     if (
         sensors
         and SCREENING_HYPOTHESES is not None
         and getattr(step, "n_hypotheses", None) == "auto"
     ):
-        step = clone(step).set_params(n_hypotheses=SCREENING_HYPOTHESES)
+        params["n_hypotheses"] = SCREENING_HYPOTHESES
     default = getattr(step, "default_matcher", None)
-    if SCREENING_QUERIES is None or default is None or getattr(step, "matcher", 0) is not None:
-        return step
-    matcher = default()
-    if not matcher.both_directions or matcher.max_matches is None:
-        return step
-    queries = max(3, int(matcher.max_matches * SCREENING_QUERIES))
-    return clone(step).set_params(matcher=matcher.set_params(max_queries=queries))
+    if (
+        SCREENING_QUERIES is not None
+        and default is not None
+        and getattr(step, "matcher", 0) is None
+    ):
+        matcher = default()
+        if matcher.both_directions and matcher.max_matches is not None:
+            queries = max(3, int(matcher.max_matches * SCREENING_QUERIES))
+            params["matcher"] = matcher.set_params(max_queries=queries)
+    return clone(step).set_params(**params) if params else step
 
 
 def _pair_context(source, target, prepared_source, prepared_target, settings, seed, views=None):
