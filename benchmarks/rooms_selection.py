@@ -42,20 +42,25 @@ SETTINGS = {
 }
 
 
+def _number(candidate: str) -> float | None:
+    """A numeric candidate; ``none``: None."""
+    return None if candidate == "none" else float(candidate)
+
+
 def _values(setting: str, candidate: str) -> dict:
-    """The module settings of ``multiway`` a candidate stands for."""
+    """The module settings of ``multiway`` a candidate of ``screening`` or
+    ``screening_queries`` stands for."""
     if setting == "screening":
         axes, hypotheses = (int(v) for v in candidate.split("/"))
         return {"SCREENING_AXES": {"scene": axes}, "SCREENING_HYPOTHESES": hypotheses}
-    value = None if candidate == "none" else float(candidate)
-    return {"SCREENING_QUERIES": value} if setting == "screening_queries" else {}
+    return {"SCREENING_QUERIES": _number(candidate)}
 
 
 def _rebuild(setting: str, candidate: str, points, n_jobs: int):
     """``register_multiway(points)`` with ``setting`` at ``candidate``."""
     if setting == "max_violation":
-        value = None if candidate == "none" else float(candidate)
-        return register_multiway(points, max_violation=value, n_jobs=n_jobs, progress=False)
+        limit = _number(candidate)
+        return register_multiway(points, max_violation=limit, n_jobs=n_jobs, progress=False)
     values = _values(setting, candidate)
     defaults = {name: getattr(multiway, name) for name in values}
     # Applied to the model and the step before the pairs are sent to the workers.
