@@ -13,6 +13,10 @@ format             one record
 ``"3dmatch"``      a line ``i j n`` and the matrix's four rows (Choi et al.'s ``.log``)
 ``"matrix"``       one 4x4 matrix per file (``np.loadtxt``), what ``--init`` reads
 =================  ==============================================================
+
+The trajectory functions take ``format="auto"`` by default: ``"3dmatch"`` for a path
+ending in ``.log`` (the suffix of Choi et al.'s files and of Open3D's trajectories),
+else ``"kitti"``. TUM files end in ``.txt`` as KITTI's do, so TUM is always named.
 """
 
 from __future__ import annotations
@@ -27,7 +31,9 @@ from scipy.spatial.transform import Rotation
 
 __all__ = [
     "POSE_FORMATS",
+    "SUFFIX_FORMATS",
     "log_records",
+    "pose_format",
     "read_matrix",
     "read_poses",
     "read_pose_graph",
@@ -40,8 +46,26 @@ __all__ = [
 
 #: What :func:`read_poses` and :func:`write_poses` read and write.
 POSE_FORMATS = ("kitti", "tum", "3dmatch")
+#: The format ``"auto"`` gives a path by its suffix (any other suffix: KITTI).
+SUFFIX_FORMATS = {".log": "3dmatch"}
 # Largest deviation from a rigid motion a pose file may hold (rounding of printed files).
 _RIGID_TOLERANCE = 1e-4
+
+
+def pose_format(path: str | os.PathLike, format: str = "auto") -> str:
+    """``format``, or for ``"auto"`` the one :data:`SUFFIX_FORMATS` gives ``path``'s
+    suffix (``.log``: ``"3dmatch"``; else ``"kitti"``).
+
+    Raises
+    ------
+    ValueError
+        For a format that is neither ``"auto"`` nor one of :data:`POSE_FORMATS`.
+    """
+    if format == "auto":
+        return SUFFIX_FORMATS.get(Path(path).suffix.lower(), "kitti")
+    if format not in POSE_FORMATS:
+        raise ValueError(f"format must be one of {('auto', *POSE_FORMATS)}, got {format!r}")
+    return format
 
 
 def _check_pose(matrix: np.ndarray, where: str) -> np.ndarray:
@@ -134,7 +158,7 @@ def log_records(path: str | os.PathLike, size: int) -> dict[tuple[int, int], np.
 def write_poses(
     path: str | os.PathLike,
     poses: Sequence,
-    format: str = "kitti",
+    format: str = "auto",
     *,
     timestamps: Sequence[float] | None = None,
     pairs: Sequence[tuple[int, int]] | None = None,
@@ -149,7 +173,9 @@ def write_poses(
     poses : sequence of array-like (4, 4)
         Rigid transformations (ValueError otherwise). KITTI only: ``None`` for a scan
         without a pose, written as a line of 12 ``nan`` so that line k stays scan k.
-    format : {"kitti", "tum", "3dmatch"}, default="kitti"
+    format : {"auto", "kitti", "tum", "3dmatch"}, default="auto"
+        ``"auto"``: ``"3dmatch"`` for a ``.log`` path, else ``"kitti"``
+        (:func:`pose_format`).
     timestamps : sequence of float, default=None
         TUM only: one per pose (default: 0, 1, 2, ...).
     pairs : sequence of (int, int), default=None
@@ -164,6 +190,7 @@ def write_poses(
         record of the run that made the poses; readers skip it. ValueError for the
         other formats.
     """
+    format = pose_format(path, format)
     if comment is not None and format != "tum":
         raise ValueError(f"a {format} trajectory has no comments; only TUM's has")
     poses = _as_poses(poses, allow_missing=format == "kitti")
@@ -181,7 +208,7 @@ def write_poses(
             quat = Rotation.from_matrix(pose[:3, :3]).as_quat()  # x, y, z, w
             values = [float(stamp), *pose[:3, 3], *quat]
             lines.append(_line(values))
-    elif format == "3dmatch":
+    else:  # "3dmatch"
         ids = [(0, k) for k in range(len(poses))] if pairs is None else list(pairs)
         if len(ids) != len(poses):
             raise ValueError(f"{len(ids)} pairs for {len(poses)} poses")
@@ -189,8 +216,6 @@ def write_poses(
         for (i, j), pose in zip(ids, poses, strict=True):
             lines.append(f"{int(i)} {int(j)} {total}")
             lines += [_line(row) for row in pose]
-    else:
-        raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
     if comment is not None:
         lines.insert(0, "# " + " ".join(comment.splitlines()))
     path.write_text("\n".join(lines) + "\n")
@@ -199,7 +224,7 @@ def write_poses(
 def write_trajectory(
     path: str | os.PathLike,
     poses: Sequence,
-    format: str = "kitti",
+    format: str = "auto",
     *,
     comment: str | None = None,
 ) -> None:
@@ -210,8 +235,10 @@ def write_trajectory(
     TUM: timestamp ``k`` names scan ``k``; scans without a pose are left out (TUM has
     no way to mark one). 3DMatch ``.log``: record ``0 k n`` is scan ``k`` into scan 0,
     ``n`` the number of scans; scans without a pose are left out. :func:`read_trajectory`
-    reads each back as the same list. ``comment``: see :func:`write_poses` (TUM only).
+    reads each back as the same list. ``format="auto"``: 3DMatch for a ``.log`` path,
+    else KITTI (:func:`pose_format`). ``comment``: see :func:`write_poses` (TUM only).
     """
+    format = pose_format(path, format)
     poses = list(poses)
     placed = [k for k, pose in enumerate(poses) if format == "kitti" or pose is not None]
     write_poses(
@@ -226,7 +253,7 @@ def write_trajectory(
 
 
 def read_trajectory(
-    path: str | os.PathLike, format: str = "kitti", n_scans: int | None = None
+    path: str | os.PathLike, format: str = "auto", n_scans: int | None = None
 ) -> list[np.ndarray | None]:
     """Scan ``k``'s pose at index ``k`` (``None`` for a scan without one), as
     :func:`write_trajectory` writes them.
@@ -235,7 +262,9 @@ def read_trajectory(
     timestamps: the poses in file order). 3DMatch ``.log``: record ``i k n`` is scan
     ``k``, every record into the same scan ``i``; the list is ``n`` long. ``n_scans``
     lengthens the list to that many scans (ValueError if a pose names a later one).
+    ``format="auto"``: 3DMatch for a ``.log`` path, else KITTI (:func:`pose_format`).
     """
+    format = pose_format(path, format)
     if format == "kitti":
         out: list = list(read_poses(path, "kitti"))
     elif format == "tum":
@@ -248,7 +277,7 @@ def read_trajectory(
                 out[int(stamp)] = pose
         else:
             out = list(poses)
-    elif format == "3dmatch":
+    else:  # "3dmatch"
         records = read_poses(path, "3dmatch")
         references = {i for i, _ in records}
         if len(references) != 1:
@@ -259,8 +288,6 @@ def read_trajectory(
         out = [None] * max(total, max(j for _, j in records) + 1)
         for (_, j), pose in records.items():
             out[j] = pose
-    else:
-        raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
     if n_scans is not None:
         if len(out) > n_scans and any(p is not None for p in out[n_scans:]):
             raise ValueError(f"{path}: poses of more than {n_scans} scans")
@@ -275,9 +302,10 @@ def _headers(path: Path) -> list[str]:
 
 
 def read_poses(
-    path: str | os.PathLike, format: str = "kitti"
+    path: str | os.PathLike, format: str = "auto"
 ) -> list[np.ndarray] | dict[tuple[int, int], np.ndarray]:
-    """Read a trajectory file :func:`write_poses` (or KITTI, TUM, 3DMatch) wrote.
+    """Read a trajectory file :func:`write_poses` (or KITTI, TUM, 3DMatch) wrote, in
+    ``format`` (``"auto"``: 3DMatch for a ``.log`` path, else KITTI; :func:`pose_format`).
 
     Returns
     -------
@@ -289,6 +317,7 @@ def read_poses(
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
+    format = pose_format(path, format)
     if format == "kitti":
         rows = _rows(path, 12)
         missing = np.isnan(rows).all(axis=1)
@@ -311,7 +340,7 @@ def read_poses(
             pose[:3, :3] = Rotation.from_quat(r[4:]).as_matrix()
             pose[:3, 3] = r[1:4]
             poses.append(pose)
-    elif format == "3dmatch":
+    else:  # "3dmatch"
         records = log_records(path, 4)
         if not records:
             raise ValueError(f"{path}: no poses in this file")
@@ -319,8 +348,6 @@ def read_poses(
             ij: _check_pose(pose, f"{path}, record {k}")
             for k, (ij, pose) in enumerate(records.items())
         }
-    else:
-        raise ValueError(f"format must be one of {POSE_FORMATS}, got {format!r}")
     return [_check_pose(p, f"{path}, pose {k}") for k, p in enumerate(poses)]
 
 

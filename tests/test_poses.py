@@ -393,6 +393,42 @@ def test_reconstruct_writes_several_trajectories_in_one_run(tmp_path):
     assert record == summary["provenance"]
     bad = args[:-4] + ["--trajectory-format", "tum"]  # three files, two formats
     assert main(bad) == 2
+    # Without --trajectory-format each file's suffix says: .log is 3DMatch's, else KITTI.
+    by_suffix = [tmp_path / "k2.txt", tmp_path / "p2.log"]
+    again = args[:8] + ["--trajectory", str(by_suffix[0]), "--trajectory", str(by_suffix[1])]
+    assert main(again) == EXIT_OK
+    assert by_suffix[0].read_text() == out[0].read_text()
+    assert by_suffix[1].read_text() == out[2].read_text()
+    # So does poses convert, both ways, with neither format named.
+    convert = ["poses", "convert", str(out[2]), str(tmp_path / "c.txt")]
+    assert main(convert) == EXIT_OK
+    assert (tmp_path / "c.txt").read_text() == out[0].read_text()
+    assert main(["poses", "convert", str(out[0]), str(tmp_path / "c.log")]) == EXIT_OK
+    assert (tmp_path / "c.log").read_text() == out[2].read_text()
+
+
+def test_a_log_path_is_a_3dmatch_trajectory_unless_told_otherwise(tmp_path):
+    """``format="auto"`` (the default of every trajectory function): 3DMatch for a
+    ``.log`` path, any case, KITTI for any other; a named format wins."""
+    from o3d_rpointhop.poses import pose_format, read_trajectory, write_trajectory
+
+    assert pose_format("a/b/gt.LOG") == "3dmatch"
+    assert pose_format("poses.txt") == pose_format("poses") == "kitti"
+    assert pose_format("poses.log", "kitti") == "kitti"
+    assert pose_format("poses.txt", "tum") == "tum"
+    with pytest.raises(ValueError, match="format must be one of"):
+        pose_format("poses.txt", "g2o")
+    poses = [np.eye(4), None, POSES[1]]
+    write_trajectory(tmp_path / "t.log", poses)
+    assert (tmp_path / "t.log").read_text().splitlines()[::5] == ["0 0 3", "0 2 3"]
+    back = read_trajectory(tmp_path / "t.log")
+    assert back[1] is None
+    np.testing.assert_allclose(back[2], POSES[1], atol=1e-12)
+    write_poses(tmp_path / "k.txt", POSES[:2])
+    assert np.loadtxt(tmp_path / "k.txt").shape == (2, 12)
+    assert list(read_poses(tmp_path / "t.log")) == [(0, 0), (0, 2)]
+    write_poses(tmp_path / "k.log", POSES[:2], "kitti")  # named: KITTI in a .log file
+    assert np.loadtxt(tmp_path / "k.log").shape == (2, 12)
 
 
 def test_pose_files_that_say_too_little_or_too_much_get_one_clear_line(tmp_path):

@@ -25,7 +25,9 @@ def add_parser(commands) -> None:
     convert = actions.add_parser(
         "convert",
         help="read INPUT in one format, write OUTPUT in another",
-        description="Read INPUT as --from and write OUTPUT as --to, scan by scan.",
+        description="Read INPUT as --from and write OUTPUT as --to, scan by scan. Either "
+        "format left out is the file's by its suffix: 3dmatch for .log, else kitti (TUM "
+        "files end in .txt as KITTI's do: name it).",
     )
     convert.add_argument("input", help="the trajectory file to read")
     convert.add_argument("output", help="the trajectory file to write")
@@ -33,11 +35,15 @@ def add_parser(commands) -> None:
         "--from",
         dest="source_format",
         choices=POSE_FORMATS,
-        required=True,
-        help="INPUT's format",
+        default="auto",
+        help="INPUT's format (default: by its suffix)",
     )
     convert.add_argument(
-        "--to", dest="target_format", choices=POSE_FORMATS, required=True, help="OUTPUT's format"
+        "--to",
+        dest="target_format",
+        choices=POSE_FORMATS,
+        default="auto",
+        help="OUTPUT's format (default: by its suffix)",
     )
     convert.add_argument(
         "--scans",
@@ -50,9 +56,11 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..io import check_output_path
-    from ..poses import read_trajectory, write_trajectory
+    from ..poses import pose_format, read_trajectory, write_trajectory
 
     check_output_path(args.output)
+    args.source_format = pose_format(args.input, args.source_format)
+    args.target_format = pose_format(args.output, args.target_format)
     poses = read_trajectory(args.input, args.source_format, args.scans)
     write_trajectory(args.output, poses, args.target_format)
     placed = sum(p is not None for p in poses)

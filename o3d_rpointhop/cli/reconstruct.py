@@ -78,7 +78,7 @@ def add_parser(commands) -> None:
         nargs="+",
         choices=POSE_FORMATS,
         help="format of each --trajectory, in the same order (one format applies to "
-        "all; default: kitti)",
+        "all; default: each file's by its suffix, 3dmatch for .log, else kitti)",
     )
     p.add_argument(
         "--result", help="save the whole result as JSON (MultiwayResult.load reads it back)"
@@ -140,9 +140,12 @@ def add_parser(commands) -> None:
 
 
 def _trajectories(paths: list[str], formats: list[str]) -> dict[str, str]:
-    """Each --trajectory file with its format (one format for all, or one each)."""
+    """Each --trajectory file with its format (one format for all, or one each; none:
+    each file's by its suffix)."""
+    from ..poses import pose_format
+
     if not formats:
-        formats = ["kitti"]
+        formats = [pose_format(p) for p in paths]
     if len(formats) == 1:
         formats = formats * len(paths)
     if paths and len(formats) != len(paths):
