@@ -225,6 +225,55 @@ def test_evaluate_scores_a_given_transformation_like_open3d():
         evaluate(source, target, np.eye(3))
 
 
+def test_evaluate_against_a_3dmatch_gt_log_takes_the_fragments_record(tmp_path, capsys):
+    """``--truth gt.log``: the record of the two fragments the names end in, either way
+    round, and with ``gt.info`` beside it the official RMSE and verdict; no record, or a
+    name without a number, is one clear error."""
+    target = make_object(1500, shape_seed=8, sample_seed=1)
+    rot, shift = random_motion(4, 0.4)
+    source = make_object(1500, shape_seed=8, sample_seed=2) @ rot.T + shift
+    np.save(tmp_path / "cloud_bin_3.npy", source)
+    np.save(tmp_path / "cloud_bin_7.npy", target)
+    truth = np.linalg.inv(motion_matrix(rot, shift))  # fragment 3 into fragment 7
+    off = motion_matrix(np.eye(3), np.array([0.3, 0.0, 0.0])) @ truth
+    write_matrix(tmp_path / "off.txt", off)
+    args = [
+        "evaluate",
+        str(tmp_path / "cloud_bin_3.npy"),
+        str(tmp_path / "cloud_bin_7.npy"),
+        "--truth",
+        str(tmp_path / "gt.log"),
+        "--json",
+    ]
+    information = np.diag([4.0, 4.0, 4.0, 1.0, 1.0, 1.0])
+    for key, matrix in (((7, 3), truth), ((3, 7), np.linalg.inv(truth))):
+        write_poses(tmp_path / "gt.log", [matrix], "3dmatch", pairs=[key], n_fragments=9)
+        (tmp_path / "gt.info").write_text(
+            f"{key[0]} {key[1]} 9\n" + "\n".join(" ".join(map(str, r)) for r in information)
+        )
+        for transform, registered in ((truth, True), (off, False)):
+            write_matrix(tmp_path / "T.txt", transform)
+            main([*args, "--transform", str(tmp_path / "T.txt")])
+            summary = json.loads(capsys.readouterr().out)
+            assert summary["record_3dmatch"] == list(key)
+            assert summary["registered_3dmatch"] is registered
+            # The official error of a pure shift is the shift (information 4 I on it).
+            want = 0.0 if registered else 0.3
+            assert summary["rmse_3dmatch"] == pytest.approx(want, abs=1e-9)
+            assert summary["translation_error"] == pytest.approx(want, abs=1e-9)
+    (tmp_path / "gt.info").unlink()  # without it: the errors, not the official test
+    assert main([*args, "--transform", str(tmp_path / "T.txt")]) == EXIT_UNRELIABLE  # off
+    summary = json.loads(capsys.readouterr().out)
+    assert "rmse_3dmatch" not in summary and summary["translation_error"] > 0.29
+    write_poses(tmp_path / "gt.log", [truth], "3dmatch", pairs=[(7, 4)])
+    assert main([*args, "--transform", str(tmp_path / "T.txt")]) == EXIT_ERROR
+    assert "holds no record of fragments 3 and 7" in capsys.readouterr().err
+    np.save(tmp_path / "scan.npy", source)
+    named = [args[0], str(tmp_path / "scan.npy"), *args[2:], "--transform", str(tmp_path / "T.txt")]
+    assert main(named) == EXIT_ERROR
+    assert "the name ends in no number" in capsys.readouterr().err
+
+
 def test_evaluate_and_pose_outputs_from_the_command_line(tmp_path, capsys, multiway):
     target = make_object(1500, shape_seed=8, sample_seed=1)
     rot, shift = random_motion(3, 0.4)

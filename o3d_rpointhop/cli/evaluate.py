@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 
-from ._common import add_json
+from ._common import CommandError, add_json
 from ._trust import flag_status
 
 __all__ = ["add_parser", "run"]
@@ -23,12 +25,18 @@ def add_parser(commands) -> None:
         "errors against a ground-truth transformation: the rotation error, the translation "
         "error about the source's centroid (at the origin a survey cloud's rotation digits "
         "would be magnified by its distance), and the RMS displacement of the source's "
-        "points between the two transformations.",
+        "points between the two transformations. --truth may be a 3DMatch gt.log: the "
+        "record of the two fragments the file names end in (cloud_bin_14.ply: 14), either "
+        "way round, and with gt.info beside it the official RMSE (registered under 0.2 m).",
     )
     p.add_argument("source", help="the cloud the transformation moves")
     p.add_argument("target", help="the cloud it moves the source onto")
     p.add_argument("--transform", required=True, help="text file with the 4x4 transformation")
-    p.add_argument("--truth", help="text file with the ground-truth 4x4 transformation")
+    p.add_argument(
+        "--truth",
+        help="text file with the ground-truth 4x4 transformation, or a 3DMatch .log of "
+        "pairs (gt.log) holding the two fragments'",
+    )
     p.add_argument(
         "--distance",
         type=float,
@@ -47,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from ..transforms import rms_displacement, rotation_error_deg, translation_error
 
     transformation = read_matrix(args.transform)
-    truth = read_matrix(args.truth) if args.truth else None
+    truth, record = _truth(args.truth, args.source, args.target) if args.truth else (None, None)
     source, target = read_cloud(args.source), read_cloud(args.target)
     result = evaluate(
         source,
@@ -74,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
             transformation, truth, about=points.mean(axis=0)
         )
         summary["rms_displacement"] = rms_displacement(transformation, truth, points)
+    if record is not None:
+        summary.update(_official(transformation, *record))
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -90,4 +100,68 @@ def run(args: argparse.Namespace) -> int:
                 f"centroid, RMS displacement of the source's points "
                 f"{summary['rms_displacement']:.6g}"
             )
+        if "rmse_3dmatch" in summary:
+            from ..evaluation.metrics import REGISTERED_RMSE
+
+            verdict = "registered" if summary["registered_3dmatch"] else "not registered"
+            print(
+                f"3DMatch record {tuple(summary['record_3dmatch'])}: RMSE "
+                f"{summary['rmse_3dmatch']:.4g} (gt.info), {verdict} by the official test "
+                f"(under {REGISTERED_RMSE})"
+            )
     return flag_status(result)
+
+
+def _fragment_number(path: str) -> int:
+    """The number a fragment's file name ends in (``cloud_bin_14.ply``: 14)."""
+    found = re.search(r"(\d+)$", Path(path).stem)
+    if found is None:
+        raise CommandError(
+            f"{path}: the name ends in no number, so no gt.log record can be chosen for it "
+            "(give --truth a 4x4 matrix file instead)"
+        )
+    return int(found[1])
+
+
+def _truth(path: str, source: str, target: str):
+    """The ground truth of SOURCE onto TARGET: a matrix file's, or for a 3DMatch
+    ``.log`` the record of the two fragments (``(i, j)`` maps fragment ``j`` into
+    ``i``, inverted when the source is ``i``) and, with the ``.info`` file beside it,
+    ``(record, its matrix, its information, whether the record maps source into
+    target)`` for the official RMSE (else None)."""
+    from ..datasets.threedmatch import read_gt_info, read_gt_log
+    from ..poses import pose_format, read_matrix
+
+    if pose_format(path) != "3dmatch":
+        return read_matrix(path), None
+    a, b = _fragment_number(source), _fragment_number(target)
+    records = read_gt_log(path)
+    if (b, a) in records:
+        key, forward = (b, a), True
+    elif (a, b) in records:
+        key, forward = (a, b), False
+    else:
+        raise CommandError(f"{path} holds no record of fragments {a} and {b}")
+    matrix = records[key]
+    truth = matrix if forward else np.linalg.inv(matrix)
+    info_path = Path(path).with_suffix(".info")
+    if not info_path.is_file():
+        return truth, None
+    information = read_gt_info(info_path).get(key)
+    if information is None:
+        raise CommandError(f"{info_path} holds no record of fragments {key[0]} and {key[1]}")
+    return truth, (key, matrix, information, forward)
+
+
+def _official(transformation, key, matrix, information, forward) -> dict:
+    """The official 3DMatch RMSE of ``transformation`` (source onto target) against the
+    record, in the record's direction."""
+    from ..evaluation.metrics import REGISTERED_RMSE, rmse_3dmatch
+
+    estimate = transformation if forward else np.linalg.inv(transformation)
+    rmse = rmse_3dmatch(estimate, matrix, information)
+    return {
+        "record_3dmatch": list(key),
+        "rmse_3dmatch": rmse,
+        "registered_3dmatch": bool(rmse < REGISTERED_RMSE),
+    }

@@ -10,6 +10,7 @@ from ..transforms import apply_transform, euler_angles_deg, rotation_error_deg, 
 from .records import PairRecord
 
 __all__ = [
+    "REGISTERED_RMSE",
     "is_symmetry",
     "mcnemar",
     "modified_chamfer",
@@ -18,6 +19,11 @@ __all__ = [
     "rmse_3dmatch",
     "summarize",
 ]
+
+
+#: The official 3DMatch test: a pair is registered when :func:`rmse_3dmatch` is under
+#: this (metres).
+REGISTERED_RMSE = 0.2
 
 
 def _wrap(deg: np.ndarray) -> np.ndarray:
@@ -135,7 +141,8 @@ def summarize(
 def rmse_3dmatch(estimate: np.ndarray, truth: np.ndarray, information: np.ndarray) -> float:
     """The official 3DMatch registration error: sqrt(xi^T I xi / I[0, 0]), with xi the
     translation and quaternion vector part of ``inv(truth) @ estimate`` and ``I`` the
-    pair's ``gt.info`` matrix (a pair counts as registered below 0.2 m)."""
+    pair's ``gt.info`` matrix (a pair counts as registered below
+    :data:`REGISTERED_RMSE`, 0.2 m)."""
     from scipy.spatial.transform import Rotation
 
     delta = np.linalg.inv(truth) @ estimate
