@@ -12,15 +12,24 @@ GB). Two thread budgets, the same for both sides: one thread each (Open3D's
 ``set_max_threads(1)``, ``n_jobs=1``) and every core each (Open3D's default, the
 descriptor's default ``n_jobs=None``).
 
+Up to 20k points every size is measured in ``--rounds`` rounds (3 by default): each
+round runs every method once, in that order, each in a fresh process, and a row keeps
+the median of its rounds' medians (``round_seconds`` holds each). A burst of load from
+elsewhere on the machine then falls on one round of one method, not on a whole row:
+single runs of the 2k rows moved by up to a third between runs minutes apart.
+
 Usage: python benchmarks/scaling.py [--sizes 2000 20000 200000 1000000]
-       [--budgets one all] [--output DIR]
-Writes DIR/scaling.json, DIR/scaling.md and DIR/scaling.png.
+       [--budgets one all] [--rounds 3] [--update] [--output DIR]
+Writes DIR/scaling.json, DIR/scaling.md and DIR/scaling.png. ``--update`` measures only
+the sizes and budgets given and keeps the file's other rows (the file records which
+rows came from which run under ``"runs"``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import time
@@ -100,6 +109,30 @@ def measure(method: str, n: int, repeats: int, budget: str) -> dict:
         text=True,
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def measure_rounds(methods: list[str], n: int, repeats: int, budget: str, rounds: int) -> list:
+    """Every method ``rounds`` times, round by round (each run a fresh process); one
+    row per method: the median of its rounds' medians, each round's in
+    ``round_seconds``, the largest peak memory."""
+    runs: dict[str, list[dict]] = {m: [] for m in methods}
+    for _ in range(rounds):
+        for method in methods:
+            runs[method].append(measure(method, n, repeats, budget))
+            print(json.dumps(runs[method][-1]), file=sys.stderr, flush=True)
+    rows = []
+    for found in runs.values():
+        seconds = [r["seconds"] for r in found]
+        rows.append(
+            {
+                **found[0],
+                "seconds": float(statistics.median(seconds)),
+                "round_seconds": seconds,
+                "rounds": len(found),
+                "peak_rss_mb": max(r["peak_rss_mb"] for r in found),
+            }
+        )
+    return rows
 
 
 def markdown(rows: list[dict], sizes: list[int]) -> str:
@@ -200,6 +233,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sizes", type=int, nargs="+", default=[2000, 20000, 200000, 1000000])
     parser.add_argument("--budgets", nargs="+", choices=["one", "all"], default=["one", "all"])
+    parser.add_argument("--rounds", type=int, default=3, help="rounds up to 20k points")
+    parser.add_argument("--update", action="store_true", help="keep the file's other rows")
     parser.add_argument("--output", default=str(RESULTS))
     parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -210,24 +245,35 @@ def main() -> None:
     for budget in args.budgets:
         for n in args.sizes:
             repeats = 21 if n <= 2_000 else 5 if n <= 20_000 else 1
-            for method in METHODS:
-                if method == "rpointhop-full" and n > FULL_MAX_POINTS:
-                    continue
-                rows.append(measure(method, n, repeats, budget))
-                print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+            rounds = max(1, args.rounds) if n <= 20_000 else 1
+            methods = [m for m in METHODS if m != "rpointhop-full" or n <= FULL_MAX_POINTS]
+            rows += measure_rounds(methods, n, repeats, budget, rounds)
     folder = Path(args.output)
     folder.mkdir(parents=True, exist_ok=True)
     facts = machine_facts()
+    this_run = provenance(args.budgets)
+    run = {"sizes": args.sizes, "budgets": args.budgets, "commit": this_run["commit"]}
+    runs, sizes = [run], list(args.sizes)
+    path = folder / "scaling.json"
+    if args.update and path.is_file():
+        before = json.loads(path.read_text())
+        measured = {(n, b) for n in args.sizes for b in args.budgets}
+        kept = [r for r in before["rows"] if (r["points"], r.get("budget", "all")) not in measured]
+        rows = kept + rows
+        first = {"commit": before["provenance"]["commit"], "note": before.get("remeasured")}
+        runs = before.get("runs", [first]) + runs
+        sizes = sorted({r["points"] for r in rows})
     result = {
         **{k: facts[k] for k in ("machine", "python", "open3d")},
         "methods": METHODS,
         "rows": rows,
-        "provenance": provenance(args.budgets),
+        "provenance": this_run,
+        "runs": runs,
     }
-    (folder / "scaling.json").write_text(json.dumps(result, indent=1))
-    (folder / "scaling.md").write_text(markdown(rows, args.sizes))
+    path.write_text(json.dumps(result, indent=1))
+    (folder / "scaling.md").write_text(markdown(rows, sizes))
     plot(rows, folder / "scaling.png")
-    print(markdown(rows, args.sizes))
+    print(markdown(rows, sizes))
 
 
 if __name__ == "__main__":
