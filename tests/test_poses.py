@@ -8,7 +8,7 @@ import json
 import numpy as np
 import open3d as o3d
 import pytest
-from helpers import motion_matrix, partial_views, random_motion
+from helpers import motion_matrix, partial_views, random_motion, synthetic_scene
 
 from o3d_rpointhop import RegistrationResult, evaluate, register, register_multiway
 from o3d_rpointhop.cli import EXIT_ERROR, EXIT_OK, EXIT_UNRELIABLE, main
@@ -454,6 +454,39 @@ def test_reconstruct_writes_several_trajectories_in_one_run(tmp_path):
     assert (tmp_path / "c.txt").read_text() == out[0].read_text()
     assert main(["poses", "convert", str(out[0]), str(tmp_path / "c.log")]) == EXIT_OK
     assert (tmp_path / "c.log").read_text() == out[2].read_text()
+
+
+def test_poses_score_counts_the_gt_log_pairs_a_reconstruction_registers(tmp_path, capsys):
+    """``poses score``: reconstruct's poses of a 3DMatch-style folder against its gt.log,
+    the official test pair by pair; a fragment unplaced or moved loses its pairs, and
+    a log without its gt.info is one clear error."""
+    synthetic_scene(tmp_path, "room", ids=(0, 4, 10), seed=5)
+    folder, gt = tmp_path / "fragments" / "room", tmp_path / "benchmarks" / "3DMatch" / "room"
+    poses = tmp_path / "p.json"
+    assert (
+        main(["reconstruct", str(folder), "-o", str(tmp_path / "m.ply"), "--poses", str(poses)])
+        == 0
+    )
+    capsys.readouterr()
+    score = ["poses", "score", str(poses), "--truth", str(gt / "gt.log")]
+    assert main(score) == EXIT_OK
+    assert "2 of 2 gt.log pairs registered" in capsys.readouterr().out
+    summary = json.loads(poses.read_text())
+    for change, registered, placed in (("unplace", 0, 2), ("move", 1, 3)):
+        edited = json.loads(json.dumps(summary))
+        if change == "unplace":
+            edited["poses"][1] = None  # cloud_bin_4: both of its pairs are lost
+        else:
+            edited["poses"][2][0][3] += 1.0  # cloud_bin_10 a metre off: pair (4, 10) lost
+        poses.write_text(json.dumps(edited))
+        assert main([*score, "--json"]) == EXIT_OK
+        out = json.loads(capsys.readouterr().out)
+        assert (out["registered"], out["pairs"]) == (registered, 2)
+        assert (out["placed_with_pairs"], out["fragments_with_pairs"]) == (placed, 3)
+        assert [r["pair"] for r in out["rmse"]] == [[0, 4], [4, 10]]
+    (gt / "gt.info").unlink()
+    assert main(score) == EXIT_ERROR
+    assert "the official test needs each pair's information" in capsys.readouterr().err
 
 
 def test_a_log_path_is_a_3dmatch_trajectory_unless_told_otherwise(tmp_path):

@@ -8,7 +8,17 @@ from pathlib import Path
 
 from ._common import CommandError
 
-__all__ = ["natural_key", "scan_paths"]
+__all__ = ["fragment_number", "natural_key", "scan_paths"]
+
+
+def fragment_number(path: str, why: str = "no gt.log record can be chosen for it") -> int:
+    """The number a fragment's file name ends in (``cloud_bin_14.ply``: 14), as 3DMatch
+    names its fragments and its ``gt.log`` numbers them; CommandError (saying ``why``
+    the number is needed) for a name that ends in none."""
+    found = re.search(r"(\d+)$", Path(path).stem)
+    if found is None:
+        raise CommandError(f"{path}: the name ends in no number, so {why}")
+    return int(found[1])
 
 
 def natural_key(path: str) -> tuple:

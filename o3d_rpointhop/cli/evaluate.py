@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 
 from ._common import CommandError, add_json
+from ._paths import fragment_number
 from ._trust import flag_status
 
 __all__ = ["add_parser", "run"]
@@ -112,17 +112,6 @@ def run(args: argparse.Namespace) -> int:
     return flag_status(result)
 
 
-def _fragment_number(path: str) -> int:
-    """The number a fragment's file name ends in (``cloud_bin_14.ply``: 14)."""
-    found = re.search(r"(\d+)$", Path(path).stem)
-    if found is None:
-        raise CommandError(
-            f"{path}: the name ends in no number, so no gt.log record can be chosen for it "
-            "(give --truth a 4x4 matrix file instead)"
-        )
-    return int(found[1])
-
-
 def _truth(path: str, source: str, target: str):
     """The ground truth of SOURCE onto TARGET: a matrix file's, or for a 3DMatch
     ``.log`` the record of the two fragments (``(i, j)`` maps fragment ``j`` into
@@ -134,7 +123,8 @@ def _truth(path: str, source: str, target: str):
 
     if pose_format(path) != "3dmatch":
         return read_matrix(path), None
-    a, b = _fragment_number(source), _fragment_number(target)
+    why = "no gt.log record can be chosen for it (give --truth a 4x4 matrix file instead)"
+    a, b = fragment_number(source, why), fragment_number(target, why)
     records = read_gt_log(path)
     if (b, a) in records:
         key, forward = (b, a), True

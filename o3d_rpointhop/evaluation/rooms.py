@@ -32,7 +32,9 @@ __all__ = [
     "RECIPE_VOXEL",
     "ROOM_METHODS",
     "markdown",
+    "pair_rmse",
     "pairs_registered",
+    "read_truth",
     "run_rooms",
     "scene_data",
     "timings_markdown",
@@ -78,15 +80,46 @@ def _relative(poses: dict[int, Any], i: int, j: int) -> np.ndarray | None:
     return np.linalg.inv(poses[i]) @ poses[j]
 
 
-def pairs_registered(poses: dict[int, Any], truth: dict) -> int:
-    """How many ground-truth pairs the poses (fragment id -> 4x4 or None) register."""
-    counted = 0
+def read_truth(gt_log: str | Path) -> dict:
+    """A ``gt.log``'s pairs with the ``gt.info`` beside it: ``(i, j) -> (the 4x4 matrix
+    mapping fragment j into i, its 6x6 information matrix)``.
+
+    Raises
+    ------
+    FileNotFoundError
+        Without the ``.info`` file the official test cannot be taken.
+    ValueError
+        If a pair of the log has no information matrix.
+    """
+    gt_log = Path(gt_log)
+    info_path = gt_log.with_suffix(".info")
+    if not info_path.is_file():
+        raise FileNotFoundError(
+            f"{info_path}: no such file; the official test needs each pair's information "
+            f"matrix beside {gt_log.name}"
+        )
+    log, info = read_gt_log(gt_log), read_gt_info(info_path)
+    missing = sorted(set(log) - set(info))
+    if missing:
+        raise ValueError(f"{info_path} holds no record of the pairs {missing[:5]} of {gt_log}")
+    return {pair: (matrix, info[pair]) for pair, matrix in log.items()}
+
+
+def pair_rmse(poses: dict[int, Any], truth: dict) -> dict[tuple[int, int], float | None]:
+    """Every ground-truth pair's official error (:func:`~.metrics.rmse_3dmatch`) of the
+    relative pose the poses (fragment id -> 4x4, None or absent: not placed) give its
+    two fragments; None where either has no pose."""
+    errors: dict[tuple[int, int], float | None] = {}
     for (i, j), (matrix, information) in truth.items():
         estimate = _relative(poses, i, j)
-        counted += bool(
-            estimate is not None and rmse_3dmatch(estimate, matrix, information) < RECALL_RMSE
-        )
-    return counted
+        errors[(i, j)] = None if estimate is None else rmse_3dmatch(estimate, matrix, information)
+    return errors
+
+
+def pairs_registered(poses: dict[int, Any], truth: dict) -> int:
+    """How many ground-truth pairs the poses (fragment id -> 4x4 or None) register: the
+    official test, :func:`pair_rmse` under :data:`RECALL_RMSE`."""
+    return sum(e is not None and e < RECALL_RMSE for e in pair_rmse(poses, truth).values())
 
 
 def _run_method(name: str, points: list[np.ndarray], seed: int, n_jobs: int):
