@@ -484,6 +484,11 @@ def test_poses_score_counts_the_gt_log_pairs_a_reconstruction_registers(tmp_path
         assert (out["registered"], out["pairs"]) == (registered, 2)
         assert (out["placed_with_pairs"], out["fragments_with_pairs"]) == (placed, 3)
         assert [r["pair"] for r in out["rmse"]] == [[0, 4], [4, 10]]
+    edited["poses"][2] = [[1.0, 0.0], [0.0, 1.0]]
+    poses.write_text(json.dumps(edited))
+    assert main(score) == EXIT_ERROR
+    assert "cloud_bin_10.ply is not a finite 4x4 matrix" in capsys.readouterr().err
+    poses.write_text(json.dumps(summary))
     (gt / "gt.info").unlink()
     assert main(score) == EXIT_ERROR
     assert "the official test needs each pair's information" in capsys.readouterr().err

@@ -121,10 +121,13 @@ def _score(args: argparse.Namespace) -> int:
     if len(set(ids)) < len(ids):
         raise CommandError(f"{args.poses}: two scans' names end in the same number")
     arrays = [None if p is None else np.asarray(p, dtype=float) for p in poses]
+    for name, pose in zip(names, arrays, strict=True):
+        if pose is not None and (pose.shape != (4, 4) or not np.isfinite(pose).all()):
+            raise CommandError(f"{args.poses}: the pose of {name} is not a finite 4x4 matrix")
     placed = dict(zip(ids, arrays, strict=True))
-    truth = {}
+    truth, present = {}, set(ids)
     for path in args.truth:
-        truth.update((p, t) for p, t in read_truth(path).items() if set(p) <= set(ids))
+        truth.update((p, t) for p, t in read_truth(path).items() if set(p) <= present)
     if not truth:
         raise CommandError(f"{', '.join(args.truth)}: no pair of these scans' fragments")
     errors = pair_rmse(placed, truth)
