@@ -81,22 +81,7 @@ def build_parser(
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
-    parser.add_argument(
-        "-v",
-        "--verbose",
-        action="count",
-        default=0,
-        help="say what is done on stderr: -v each stage (files read, steps, edges), -vv "
-        "every detail (the library's 'o3d_rpointhop' logger at INFO / DEBUG)",
-    )
-    parser.add_argument(
-        "-q",
-        "--quiet",
-        action="store_true",
-        help="errors only on stderr: no warnings (the exit status still says when a "
-        "result is flagged)",
-    )
+    _add_output_options(parser, 0, False)
     commands = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", help="what to do (COMMAND --help)"
     )
@@ -112,6 +97,8 @@ def build_parser(
             sub = commands.add_parser(name, **kwargs)
             if not every and name != chosen:
                 raise _Declared
+            # After the command too (reconstruct scans/ -v), as people type them.
+            _add_output_options(sub, argparse.SUPPRESS, argparse.SUPPRESS)
             return sub
 
     for command in COMMANDS:
@@ -120,6 +107,31 @@ def build_parser(
         except _Declared:
             pass
     return parser
+
+
+def _add_output_options(parser: argparse.ArgumentParser, count, flag) -> None:
+    """--debug, -v / --verbose and -q / --quiet, with these defaults (the commands'
+    copies default to ``argparse.SUPPRESS``: left out, the ones given before the
+    command stand)."""
+    parser.add_argument(
+        "--debug", action="store_true", default=flag, help="on an error, show the full traceback"
+    )
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=count,
+        help="say what is done on stderr: -v each stage (files read, steps, edges), -vv "
+        "every detail (the library's 'o3d_rpointhop' logger at INFO / DEBUG)",
+    )
+    parser.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        default=flag,
+        help="errors only on stderr: no warnings (the exit status still says when a "
+        "result is flagged)",
+    )
 
 
 class _Lines(logging.Formatter):

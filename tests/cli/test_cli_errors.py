@@ -192,3 +192,10 @@ def test_verbose_says_what_is_done_and_quiet_says_only_errors(tmp_path, capsys):
     assert "o3d-rpointhop: warning: the result did not converge" in capsys.readouterr().err
     assert main(["-q", "register", *bad]) == 3
     assert capsys.readouterr().err == ""
+    # After the command, as people type them, the same.
+    assert main(["register", *bad, "-q"]) == 3
+    assert capsys.readouterr().err == ""
+    assert main(["register", *pair, "-vv"]) == 0
+    assert "o3d-rpointhop: debug: step global: fitness" in capsys.readouterr().err
+    with pytest.raises(FileNotFoundError):  # --debug after the command: the traceback
+        main(["register", pair[0], str(tmp_path / "missing.npy"), "--debug"])
