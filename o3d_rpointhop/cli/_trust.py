@@ -9,7 +9,14 @@ from collections.abc import Sequence
 
 from ._common import EXIT_OK, EXIT_UNRELIABLE, EXIT_UNTRUSTED
 
-__all__ = ["flag_status", "log", "read_noting_precision", "trust_problems", "trust_status"]
+__all__ = [
+    "flag_status",
+    "log",
+    "read_noting_precision",
+    "report_reconstruction",
+    "trust_problems",
+    "trust_status",
+]
 
 
 #: Where the commands' warnings go (stderr, unless -q; see ``cli.main``).
@@ -78,3 +85,21 @@ def flag_status(result) -> int:
         )
         return EXIT_UNRELIABLE
     return EXIT_OK
+
+
+def report_reconstruction(summary: dict, first_scan: str) -> None:
+    """What a reconstruction's summary (``MultiwayResult.as_dict``) says a user must
+    know, on stderr: the frame when it is not the first scan's, every scan left out and
+    why, and the placed scans that hang on edges no loop checks (-v names each)."""
+    if summary["frame"] != first_scan:
+        log.warning(f"{first_scan} is not placed: the poses are in {summary['frame']}'s frame")
+    for name, why in summary["left_out"].items():
+        log.warning(f"left out: {name}: {why}")
+    unverified = summary.get("unverified", {})
+    if unverified:
+        log.warning(
+            f"{len(unverified)} placed scans hang on edges no loop of the pose graph checks "
+            "(a wrong one moves every scan beyond it): 'unverified' in --poses; -v names them"
+        )
+    for name, why in unverified.items():
+        log.info(f"unverified: {name}: {why}")

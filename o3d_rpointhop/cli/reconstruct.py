@@ -29,7 +29,7 @@ from ._descriptor import chosen_descriptor, descriptor_from
 from ._edge_flags import add_edge_limits
 from ._options import reconstruct_options
 from ._paths import scan_paths
-from ._trust import log
+from ._trust import log, report_reconstruction
 from .view import add_view
 
 
@@ -234,10 +234,7 @@ def run(args: argparse.Namespace) -> int:
         f"{len(result.edges)} edges kept, {result.seconds:.1f} s; merged cloud "
         f"({len(merged.points)} points) written to {args.output}"
     )
-    if result.frame != 0:
-        log.warning(f"{args.scans[0]} is not placed: the poses are in {summary['frame']}'s frame")
-    for name, why in summary["left_out"].items():
-        log.warning(f"left out: {name}: {why}")
+    report_reconstruction(summary, args.scans[0])
     if args.view:
         from ..viewer import show_multiway
 

@@ -10,6 +10,7 @@ import open3d as o3d
 from .settings import RegistrationSettings
 
 __all__ = [
+    "bridges",
     "largest_part",
     "optimise",
     "optimise_pose_graph",
@@ -38,6 +39,60 @@ def spanning_tree(edges: dict, n: int) -> list[tuple[int, int]]:
     forest = minimum_spanning_tree(coo_matrix((weights, (rows, cols)), shape=(n, n)).tocsr())
     kept = {(min(i, j), max(i, j)) for i, j in zip(*forest.nonzero(), strict=True)}
     return [pair for pair, _ in ordered if (min(pair), max(pair)) in kept]
+
+
+def bridges(edges: list[tuple[int, int]], root: int) -> list[tuple[tuple[int, int], list[int]]]:
+    """The edges of ``root``'s part that no loop of the graph contains, each with the
+    scans it alone joins to ``root`` (its far side, sorted), in O(scans + edges).
+
+    A wrong edge inside a loop pulls against the loop's other edges, which the pose
+    graph's optimisation weighs (and may prune); a wrong bridge moves everything beyond
+    it, and nothing in the graph can tell. The bridges and their far sides do not depend
+    on the order of ``edges``; they are listed by edge.
+    """
+    graph: dict[int, list[tuple[int, int]]] = {}
+    for k, (i, j) in enumerate(edges):
+        graph.setdefault(i, []).append((j, k))
+        graph.setdefault(j, []).append((i, k))
+    if root not in graph:
+        return []
+    # Tarjan's bridges, depth first without recursion: an edge to a child is a bridge
+    # when nothing under the child reaches back above it.
+    order, low, through = {root: 0}, {root: 0}, {root: -1}
+    children: dict[int, list[int]] = {root: []}
+    found = []
+    stack = [(root, iter(graph[root]))]
+    while stack:
+        node, neighbours = stack[-1]
+        for other, k in neighbours:
+            if k == through[node]:
+                continue
+            if other in order:
+                low[node] = min(low[node], order[other])
+                continue
+            order[other] = low[other] = len(order)
+            through[other] = k
+            children[node].append(other)
+            children[other] = []
+            stack.append((other, iter(graph[other])))
+            break
+        else:
+            stack.pop()
+            if stack:
+                parent = stack[-1][0]
+                low[parent] = min(low[parent], low[node])
+                if low[node] > order[parent]:
+                    found.append(node)
+    out = []
+    for node in found:
+        side, todo = [], [node]
+        while todo:
+            x = todo.pop()
+            side.append(x)
+            todo.extend(children[x])
+        i, j = edges[through[node]]
+        out.append(((i, j), sorted(side)))
+    return sorted(out)
 
 
 def parts(edges: dict, n: int) -> list[list[int]]:

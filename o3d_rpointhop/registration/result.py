@@ -477,7 +477,9 @@ class MultiwayResult:
             ``{scan index: reason}`` for every unconnected scan.
         """
         names = names or [f"scan {k}" for k in range(len(self.poses))]
-        placed = self.parts[0] if self.parts else [k for k, p in enumerate(self.poses) if p]
+        placed = (
+            self.parts[0] if self.parts else [k for k, p in enumerate(self.poses) if p is not None]
+        )
         floor = 0.0 if self.min_fitness is None else self.min_fitness
         limit = 1.0 if self.max_violation is None else self.max_violation
         reasons = {}
@@ -513,6 +515,50 @@ class MultiwayResult:
                     "the rest of the placed part"
                 )
         return reasons
+
+    def unverified(self, names: list[str] | None = None) -> dict[int, str]:
+        """The placed scans that hang on edges no loop of the pose graph checks, each
+        with those edges, in words.
+
+        An edge inside a loop of kept edges is checked by the loop's other edges (the
+        optimisation weighs them against each other); a bridge, an edge no loop
+        contains, is not: if its pose is wrong, every scan beyond it is placed wrong
+        and nothing in the graph can tell. The scans are placed all the same (and
+        ``reconstruct`` exits 0 for them); this says which placements rest on one
+        pair's word. On the scene model's training rooms every wrongly placed group
+        hung on such an edge, and about half of such edges were right
+        (docs/multiway.md, "Placements no loop checks").
+
+        Parameters
+        ----------
+        names : list of str, default=None
+            What to call the scans (default: ``"scan k"``).
+
+        Returns
+        -------
+        dict
+            ``{scan index: reason}`` for every placed scan beyond a bridge, the bridges
+            listed from the frame's scan outwards.
+        """
+        from .pose_graph import bridges
+
+        names = names or [f"scan {k}" for k in range(len(self.poses))]
+        found = bridges([tuple(e) for e in self.edges], self.frame)
+        # From the frame outwards: a nearer bridge has more scans beyond it.
+        found.sort(key=lambda b: (-len(b[1]), b[0]))
+        behind: dict[int, list[str]] = {}
+        for (i, j), side in found:
+            fitness = self.pairs[(i, j)][1] if (i, j) in self.pairs else float("nan")
+            words = f"{names[i]} - {names[j]} (edge fitness {fitness:.2f})"
+            for k in side:
+                behind.setdefault(k, []).append(words)
+        return {
+            k: (
+                f"placed through {len(edges)} edge{'s' if len(edges) > 1 else ''} that no "
+                f"loop of the pose graph checks: {', then '.join(edges)}"
+            )
+            for k, edges in sorted(behind.items())
+        }
 
     def merge(
         self,
@@ -698,6 +744,7 @@ class MultiwayResult:
             "poses": [None if p is None else p.tolist() for p in self.poses],
             "unconnected": [names[k] for k in self.unconnected],
             "left_out": {names[k]: why for k, why in self.left_out(names).items()},
+            "unverified": {names[k]: why for k, why in self.unverified(names).items()},
             "frame": names[self.frame],
             "parts": [[names[k] for k in part] for part in self.parts],
             "edges": [[names[i], names[j]] for i, j in self.edges],

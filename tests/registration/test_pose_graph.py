@@ -1,10 +1,17 @@
-"""The pose graph's spanning tree and the poses along it, on hand-made graphs."""
+"""The pose graph's spanning tree, the poses along it and its bridges, on hand-made and
+random graphs."""
 
 from __future__ import annotations
 
-import numpy as np
+import logging
 
-from o3d_rpointhop.registration.pose_graph import poses_from_tree, spanning_tree
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from o3d_rpointhop.cli._trust import report_reconstruction
+from o3d_rpointhop.registration.pose_graph import bridges, poses_from_tree, spanning_tree
+from o3d_rpointhop.registration.result import MultiwayResult
 
 
 def _edges(fitness: dict) -> dict:
@@ -25,3 +32,75 @@ def test_poses_follow_the_tree_from_scan_0():
     edges = {(0, 1): (shift, 0.9, None), (1, 2): (shift, 0.8, None)}
     poses = poses_from_tree(spanning_tree(edges, 4), edges, 4)
     assert [p[0, 3] for p in poses[:3]] == [0.0, 1.0, 2.0] and poses[3] is None
+
+
+# A triangle 0-1-2 with a tail 2-3-4, a triangle 4-5-6 at its end and a leaf 1-7.
+GRAPH = [(0, 1), (1, 2), (0, 2), (2, 3), (3, 4), (4, 5), (5, 6), (4, 6), (1, 7)]
+
+
+def test_bridges_are_the_edges_no_loop_holds_with_what_lies_beyond():
+    """Worked by hand, from two roots; the order of the edges changes nothing."""
+    assert bridges(GRAPH, 0) == [((1, 7), [7]), ((2, 3), [3, 4, 5, 6]), ((3, 4), [4, 5, 6])]
+    assert bridges(GRAPH, 5) == [((1, 7), [7]), ((2, 3), [0, 1, 2, 7]), ((3, 4), [0, 1, 2, 3, 7])]
+    assert bridges(GRAPH[::-1], 0) == bridges(GRAPH, 0)
+    assert bridges(GRAPH, 9) == []  # a scan no edge touches
+    assert bridges([(0, 1), (1, 2), (2, 0)], 1) == []
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sets(st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=20), st.integers(0, 9))
+def test_bridges_match_removing_each_edge_in_turn(pairs, root):
+    """An edge is a bridge when removing it cuts scans off the root, and its far side
+    is what is cut off (what the root then reaches no longer)."""
+    edges = sorted({(min(p), max(p)) for p in pairs if p[0] != p[1]})
+
+    def reach(kept):
+        seen, todo = {root}, [root]
+        while todo:
+            x = todo.pop()
+            for i, j in kept:
+                for a, b in ((i, j), (j, i)):
+                    if a == x and b not in seen:
+                        seen.add(b)
+                        todo.append(b)
+        return seen
+
+    whole = reach(edges)
+    want = []
+    for e in edges:
+        if e[0] in whole:
+            cut = whole - reach([x for x in edges if x != e])
+            if cut:
+                want.append((e, sorted(cut)))
+    assert bridges(edges, root) == want
+
+
+def test_a_reconstruction_names_the_scans_beyond_its_bridges(caplog):
+    """``MultiwayResult.unverified``: every placed scan beyond a bridge, with the bridges
+    from the frame's scan outwards and their fitness; the summary holds it and the
+    command line warns once and names each with -v."""
+    poses = [np.eye(4)] * 8 + [None]
+    pairs = {e: (np.eye(4), 0.5 + 0.01 * k) for k, e in enumerate(GRAPH)}
+    result = MultiwayResult(poses=poses, pose_graph=None, pairs=pairs, edges=GRAPH, frame=0)
+    reasons = result.unverified()
+    assert sorted(reasons) == [3, 4, 5, 6, 7]
+    assert reasons[7] == (
+        "placed through 1 edge that no loop of the pose graph checks: "
+        "scan 1 - scan 7 (edge fitness 0.58)"
+    )
+    assert reasons[5] == (
+        "placed through 2 edges that no loop of the pose graph checks: scan 2 - scan 3 "
+        "(edge fitness 0.53), then scan 3 - scan 4 (edge fitness 0.54)"
+    )
+    names = [f"s{k}.ply" for k in range(9)]
+    summary = result.as_dict(names)
+    assert sorted(summary["unverified"]) == ["s3.ply", "s4.ply", "s5.ply", "s6.ply", "s7.ply"]
+    with caplog.at_level(logging.INFO, logger="o3d_rpointhop.cli"):
+        report_reconstruction(summary, names[0])
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines[0].startswith("5 placed scans hang on edges no loop of the pose graph")
+    assert lines[1].startswith("unverified: s3.ply: placed through 1 edge")
+    triangle = MultiwayResult(
+        poses=poses[:3], pose_graph=None, pairs=pairs, edges=GRAPH[:3], frame=0
+    )
+    assert triangle.unverified() == {}
