@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from .open3d_interop import to_point_cloud
+from .registration.pose_graph import bridges
 from .registration.result import SCAN_COLOURS
 
 __all__ = ["COLOURS", "DISPLAY_POINTS", "served_address", "show_multiway", "show_registration"]
@@ -29,6 +30,7 @@ COLOURS = {
     "matches_other": (214, 39, 40),
     "correspondences": (148, 103, 189),
     "pose_graph": (20, 20, 20),
+    "unchecked_edges": (227, 119, 194),
 }
 
 
@@ -290,8 +292,9 @@ def show_multiway(
     names: list[str] | None = None,
 ):
     """Serve a reconstruction: every placed scan in its own colour (toggled one by one),
-    the pose graph's kept edges as lines between the scans' centres, and the result's
-    numbers and a legend in the panel.
+    the pose graph's kept edges as lines between the scans' centres (the edges no loop
+    checks, :meth:`MultiwayResult.unverified`'s, in a colour of their own), and the
+    result's numbers and a legend in the panel.
 
     Parameters
     ----------
@@ -336,14 +339,18 @@ def show_multiway(
         )
         boxes.append((names[k], handle, colour))
     edges = [(i, j) for i, j in result.edges if i in centres and j in centres]
-    graph = []
-    if edges:
-        ends = np.array([[centres[i], centres[j]] for i, j in edges], dtype=np.float32)
-        graph.append(
-            server.scene.add_line_segments(
-                "/pose_graph", ends, COLOURS["pose_graph"], thickness=2 * size
+    # Bridges (edges no loop checks: MultiwayResult.unverified) apart, in their colour.
+    unchecked = {edge for edge, _ in bridges(edges, result.frame)}
+    graph, bridge_lines = [], []
+    for kind, chosen, out in (
+        ("pose_graph", [e for e in edges if e not in unchecked], graph),
+        ("unchecked_edges", sorted(unchecked), bridge_lines),
+    ):
+        if chosen:
+            ends = np.array([[centres[i], centres[j]] for i, j in chosen], dtype=np.float32)
+            out.append(
+                server.scene.add_line_segments(f"/{kind}", ends, COLOURS[kind], thickness=2 * size)
             )
-        )
     rows = [
         "**Reconstruction**",
         "",
@@ -353,13 +360,20 @@ def show_multiway(
     ]
     if result.unconnected:
         rows.append(f"- unconnected: {', '.join(names[k] for k in result.unconnected)}")
+    unverified = result.unverified(names)
+    if unverified:
+        rows.append(f"- {len(unverified)} scans hang on edges no loop checks")
     server.gui.add_markdown("\n".join(rows))
     legend = [(label, colour) for label, _, colour in boxes]
     if graph:
         legend.append(("pose graph edges", COLOURS["pose_graph"]))
+    if bridge_lines:
+        legend.append(("edges no loop checks", COLOURS["unchecked_edges"]))
     server.gui.add_html(_legend(legend))
     for label, handle, _ in boxes:
         _toggle(server, label, [handle])
     if graph:
         _toggle(server, "pose graph edges", graph)
+    if bridge_lines:
+        _toggle(server, "edges no loop checks", bridge_lines)
     return _serve(server, block, host)

@@ -4,6 +4,8 @@ reconstruction where its pose sends it."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from helpers import free_port, partial_views, random_motion
@@ -118,6 +120,13 @@ def test_a_legend_with_distinct_colours_and_scans_named_by_file(drawn, panel):
     assert set(names) <= set(panel["checkbox"]) and "scan 0" not in panel["checkbox"]
     with pytest.raises(ValueError, match="2 names for 3 scans"):
         show_multiway(scans, multiway, port=free_port(), block=False, names=names[:2])
+    # A chain of edges: each is a bridge, drawn and listed in its own colour.
+    chain = dataclasses.replace(multiway, edges=[(0, 1), (1, 2)])
+    show_multiway(scans, chain, port=free_port(), block=False, names=names).stop()
+    legend = panel["html"][-1]
+    assert "edges no loop checks" in legend and "pose graph edges" not in legend
+    assert f"rgb{COLOURS['unchecked_edges']}" in legend
+    assert "edges no loop checks" in panel["checkbox"]
 
 
 def test_the_address_printed_is_the_one_served():
