@@ -123,10 +123,10 @@ def pairs_registered(poses: dict[int, Any], truth: dict) -> int:
 
 
 def _run_method(name: str, points: list[np.ndarray], seed: int, n_jobs: int):
-    """One method's reconstruction: its poses (scan order) and, for ``auto``, the model
-    it chose."""
+    """One method's reconstruction: its poses (scan order), for ``auto`` the model it
+    chose, and for this library's multiway the result (its unverified placements)."""
     if name == "open3d-recipe":
-        return open3d_multiway_recipe(points, RECIPE_VOXEL, seed).poses, None
+        return open3d_multiway_recipe(points, RECIPE_VOXEL, seed).poses, None, None
     if name == "fpfh":
         result = register_multiway(
             points,
@@ -138,9 +138,9 @@ def _run_method(name: str, points: list[np.ndarray], seed: int, n_jobs: int):
             n_jobs=n_jobs,
             progress=False,
         )
-        return result.poses, None
+        return result.poses, None, result
     result = register_multiway(points, random_state=seed, n_jobs=n_jobs, progress=False)
-    return result.poses, result.model
+    return result.poses, result.model, result
 
 
 def run_rooms(
@@ -172,7 +172,9 @@ def run_rooms(
     -------
     dict
         JSON-ready: settings, and per scene its split, fragments, ground-truth pairs
-        and, per method, the pairs registered, the fragments placed and the time.
+        and, per method, the pairs registered, the fragments placed, the time and, for
+        this library's multiway, the placed scans beyond edges no loop checks
+        (``unverified``: :meth:`~o3d_rpointhop.registration.MultiwayResult.unverified`).
     """
     unknown = [m for m in methods if m not in ROOM_METHODS]
     if unknown:
@@ -205,7 +207,7 @@ def run_rooms(
         }
         for method in methods:
             start = time.perf_counter()
-            poses, model = _run_method(method, points, seed, n_jobs)
+            poses, model, result = _run_method(method, points, seed, n_jobs)
             seconds = time.perf_counter() - start
             by_id = dict(zip(ids, poses, strict=True))
             row = {
@@ -214,6 +216,8 @@ def run_rooms(
                 "placed": sum(p is not None for p in poses),
                 "seconds": round(seconds, 1),
             }
+            if result is not None:  # placed scans that hang on edges no loop checks
+                row["unverified"] = len(result.unverified())
             if model is not None:
                 row["model"] = model["model"]
             entry["methods"][method] = row

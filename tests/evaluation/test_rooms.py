@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from helpers import synthetic_scene
 
 from o3d_rpointhop.evaluation.rooms import (
     ROOM_METHODS,
@@ -84,3 +85,16 @@ def test_unknown_methods_and_scenes_are_refused(tmp_path):
     (tmp_path / "3dmatch" / "fragments" / "a-scene").mkdir(parents=True)
     with pytest.raises(ValueError, match="no 3DMatch scene matches"):
         run_rooms(["kitchen"], data=tmp_path)
+
+
+def test_a_synthetic_room_is_rebuilt_and_scored(tmp_path):
+    """run_rooms end to end on a 3DMatch-style folder of three views: both gt pairs
+    registered, every fragment placed, none of them beyond an edge no loop checks (the
+    three views overlap pairwise: a loop)."""
+    synthetic_scene(tmp_path, "room", ids=(0, 4, 10), seed=5)
+    lines = []
+    out = run_rooms(methods=("auto",), data=tmp_path, n_jobs=1, log=lines.append)
+    row = out["scenes"]["room"]["methods"]["auto"]
+    assert out["scenes"]["room"]["gt_pairs"] == 2
+    assert (row["gt_pairs_registered"], row["placed_with_pairs"], row["placed"]) == (2, 3, 3)
+    assert row["unverified"] == 0 and len(lines) == 1
