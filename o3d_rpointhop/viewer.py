@@ -362,7 +362,7 @@ def show_multiway(
         rows.append(f"- unconnected: {', '.join(names[k] for k in result.unconnected)}")
     unverified = result.unverified(names)
     if unverified:
-        rows.append(f"- {len(unverified)} scans hang on edges no loop checks")
+        rows.append(f"- {len(unverified)} scans joined by edges no loop checks")
     server.gui.add_markdown("\n".join(rows))
     legend = [(label, colour) for label, _, colour in boxes]
     if graph:

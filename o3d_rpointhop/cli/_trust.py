@@ -90,7 +90,7 @@ def flag_status(result) -> int:
 def report_reconstruction(summary: dict, first_scan: str) -> None:
     """What a reconstruction's summary (``MultiwayResult.as_dict``) says a user must
     know, on stderr: the frame when it is not the first scan's, every scan left out and
-    why, and the placed scans that hang on edges no loop checks (-v names each)."""
+    why, and how many placed scans rest on edges no loop checks (-v names each)."""
     if summary["frame"] != first_scan:
         log.warning(f"{first_scan} is not placed: the poses are in {summary['frame']}'s frame")
     for name, why in summary["left_out"].items():
@@ -98,8 +98,9 @@ def report_reconstruction(summary: dict, first_scan: str) -> None:
     unverified = summary.get("unverified", {})
     if unverified:
         log.warning(
-            f"{len(unverified)} placed scans hang on edges no loop of the pose graph checks "
-            "(a wrong one moves every scan beyond it): 'unverified' in --poses; -v names them"
+            f"{len(unverified)} placed scans are joined to the others by edges no loop of "
+            "the pose graph checks (a wrong one misplaces them): 'unverified' in --poses; -v "
+            "names them"
         )
     for name, why in unverified.items():
         log.info(f"unverified: {name}: {why}")

@@ -216,7 +216,7 @@ def run_rooms(
                 "placed": sum(p is not None for p in poses),
                 "seconds": round(seconds, 1),
             }
-            if result is not None:  # placed scans that hang on edges no loop checks
+            if result is not None:  # placed scans joined by edges no loop checks
                 row["unverified"] = len(result.unverified())
             if model is not None:
                 row["model"] = model["model"]

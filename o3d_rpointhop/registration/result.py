@@ -517,16 +517,18 @@ class MultiwayResult:
         return reasons
 
     def unverified(self, names: list[str] | None = None) -> dict[int, str]:
-        """The placed scans that hang on edges no loop of the pose graph checks, each
-        with those edges, in words.
+        """The placed scans joined to the rest of the reconstruction by edges no loop
+        of the pose graph checks, each with those edges, in words.
 
         An edge inside a loop of kept edges is checked by the loop's other edges (the
         optimisation weighs them against each other); a bridge, an edge no loop
-        contains, is not: if its pose is wrong, every scan beyond it is placed wrong
-        and nothing in the graph can tell. The scans are placed all the same (and
-        ``reconstruct`` exits 0 for them); this says which placements rest on one
-        pair's word. On the scene model's training rooms every wrongly placed group
-        hung on such an edge, and about half of such edges were right
+        contains, is not: if its pose is wrong, the scans on one side are placed wrong
+        against those on the other and nothing in the graph can tell. Each bridge
+        names the scans on its smaller side (on a tie, the side without the frame's
+        scan). The scans are placed all the same (and ``reconstruct`` exits 0 for
+        them); this says which placements rest on one pair's word. On the scene
+        model's training and held-out rooms every wrongly placed group was the
+        smaller side of such an edge, and most such edges were right
         (docs/multiway.md, "Placements no loop checks").
 
         Parameters
@@ -537,25 +539,30 @@ class MultiwayResult:
         Returns
         -------
         dict
-            ``{scan index: reason}`` for every placed scan beyond a bridge, the bridges
-            listed from the frame's scan outwards.
+            ``{scan index: reason}`` for every placed scan on the smaller side of a
+            bridge, its bridges listed from the larger sides to the smaller.
         """
         from .pose_graph import bridges
 
         names = names or [f"scan {k}" for k in range(len(self.poses))]
-        found = bridges([tuple(e) for e in self.edges], self.frame)
-        # From the frame outwards: a nearer bridge has more scans beyond it.
-        found.sort(key=lambda b: (-len(b[1]), b[0]))
+        placed = {k for k, pose in enumerate(self.poses) if pose is not None}
+        sides = []
+        for (i, j), far in bridges([tuple(e) for e in self.edges], self.frame):
+            near = sorted(placed - set(far))
+            sides.append(((i, j), far if len(far) <= len(near) else near))
+        # The larger cut-off sides first: the bridges nearest the rest of the room.
+        sides.sort(key=lambda b: (-len(b[1]), b[0]))
         behind: dict[int, list[str]] = {}
-        for (i, j), side in found:
+        for (i, j), side in sides:
             fitness = self.pairs[(i, j)][1] if (i, j) in self.pairs else float("nan")
             words = f"{names[i]} - {names[j]} (edge fitness {fitness:.2f})"
             for k in side:
                 behind.setdefault(k, []).append(words)
         return {
             k: (
-                f"placed through {len(edges)} edge{'s' if len(edges) > 1 else ''} that no "
-                f"loop of the pose graph checks: {', then '.join(edges)}"
+                f"joined to the other scans through {len(edges)} edge"
+                f"{'s' if len(edges) > 1 else ''} that no loop of the pose graph checks: "
+                + ", then ".join(edges)
             )
             for k, edges in sorted(behind.items())
         }
