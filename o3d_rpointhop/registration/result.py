@@ -524,12 +524,12 @@ class MultiwayResult:
         optimisation weighs them against each other); a bridge, an edge no loop
         contains, is not: if its pose is wrong, the scans on one side are placed wrong
         against those on the other and nothing in the graph can tell. Each bridge
-        names the scans on its smaller side (on a tie, the side without the frame's
-        scan). The scans are placed all the same (and ``reconstruct`` exits 0 for
-        them); this says which placements rest on one pair's word. On the scene
-        model's training and held-out rooms every wrongly placed group was the
-        smaller side of such an edge, and most such edges were right
-        (docs/multiway.md, "Placements no loop checks").
+        names the scans on its smaller side (of two alike, the one whose kept edges sum
+        to less fitness; then the side without the frame's scan). The scans are placed
+        all the same (and ``reconstruct`` exits 0 for them); this says which placements
+        rest on one pair's word. On the scene model's training and held-out rooms every
+        wrongly placed group was the smaller side of such an edge, and most such edges
+        were right (docs/multiway.md, "Placements no loop checks").
 
         Parameters
         ----------
@@ -546,10 +546,20 @@ class MultiwayResult:
 
         names = names or [f"scan {k}" for k in range(len(self.poses))]
         placed = {k for k, pose in enumerate(self.poses) if pose is not None}
+
+        def support(side: list[int]) -> float:
+            inside = set(side)
+            return sum(
+                self.pairs.get(tuple(e), (None, 0.0))[1] for e in self.edges if set(e) <= inside
+            )
+
         sides = []
         for (i, j), far in bridges([tuple(e) for e in self.edges], self.frame):
             near = sorted(placed - set(far))
-            sides.append(((i, j), far if len(far) <= len(near) else near))
+            # The smaller side; of two alike, the one its kept edges support less, so
+            # that the order the scans came in decides only a tie of both.
+            key_far, key_near = (len(far), support(far)), (len(near), support(near))
+            sides.append(((i, j), far if key_far <= key_near else near))
         # The larger cut-off sides first: the bridges nearest the rest of the room.
         sides.sort(key=lambda b: (-len(b[1]), b[0]))
         behind: dict[int, list[str]] = {}

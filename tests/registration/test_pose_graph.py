@@ -78,35 +78,33 @@ def test_bridges_match_removing_each_edge_in_turn(pairs, root):
 
 def test_a_reconstruction_names_the_scans_on_the_small_side_of_its_bridges(caplog):
     """``MultiwayResult.unverified``: every placed scan on the smaller side of a bridge
-    (a tie: the side without the frame's scan), with its bridges from the larger sides
-    to the smaller and their fitness; the summary holds it and the command line warns
-    once and names each with -v."""
+    (of two alike, the less supported), with its bridges from the larger sides to the
+    smaller and their fitness, whichever scan is the frame; the summary holds it and
+    the command line warns once and names each with -v."""
     poses = [np.eye(4)] * 8 + [None]
     pairs = {e: (np.eye(4), 0.5 + 0.01 * k) for k, e in enumerate(GRAPH)}
     result = MultiwayResult(poses=poses, pose_graph=None, pairs=pairs, edges=GRAPH, frame=0)
     reasons = result.unverified()
-    # 2-3 cuts 4 scans from 4 (the side without scan 0), 3-4 three, 1-7 one.
-    assert sorted(reasons) == [3, 4, 5, 6, 7]
+    # 2-3 cuts 0, 1, 2, 7 (kept fitness 2.11) from 3-6 (2.22); 3-4 cuts 4-6, 1-7 cuts 7.
+    assert sorted(reasons) == [0, 1, 2, 4, 5, 6, 7]
     assert reasons[7] == (
-        "joined to the other scans through 1 edge that no loop of the pose graph checks: "
-        "scan 1 - scan 7 (edge fitness 0.58)"
+        "joined to the other scans through 2 edges that no loop of the pose graph checks: "
+        "scan 2 - scan 3 (edge fitness 0.53), then scan 1 - scan 7 (edge fitness 0.58)"
     )
     assert reasons[5] == (
-        "joined to the other scans through 2 edges that no loop of the pose graph checks: "
-        "scan 2 - scan 3 (edge fitness 0.53), then scan 3 - scan 4 (edge fitness 0.54)"
+        "joined to the other scans through 1 edge that no loop of the pose graph checks: "
+        "scan 3 - scan 4 (edge fitness 0.54)"
     )
-    # Seen from scan 5 the same bridges cut the same sides but 2-3's tie: now 0, 1, 2, 7.
-    from_five = dataclasses.replace(result, frame=5).unverified()
-    assert sorted(from_five) == [0, 1, 2, 4, 5, 6, 7]
-    assert from_five[4].endswith("scan 3 - scan 4 (edge fitness 0.54)")
+    for frame in range(8):  # the same sides seen from any scan
+        assert dataclasses.replace(result, frame=frame).unverified() == reasons
     names = [f"s{k}.ply" for k in range(9)]
     summary = result.as_dict(names)
-    assert sorted(summary["unverified"]) == ["s3.ply", "s4.ply", "s5.ply", "s6.ply", "s7.ply"]
+    assert sorted(summary["unverified"]) == [f"s{k}.ply" for k in (0, 1, 2, 4, 5, 6, 7)]
     with caplog.at_level(logging.INFO, logger="o3d_rpointhop.cli"):
         report_reconstruction(summary, names[0])
     lines = [r.getMessage() for r in caplog.records]
-    assert lines[0].startswith("5 placed scans are joined to the others by edges no loop")
-    assert lines[1].startswith("unverified: s3.ply: joined to the other scans through 1 edge")
+    assert lines[0].startswith("7 placed scans are joined to the others by edges no loop")
+    assert lines[1].startswith("unverified: s0.ply: joined to the other scans through 1 edge")
     triangle = MultiwayResult(
         poses=poses[:3], pose_graph=None, pairs=pairs, edges=GRAPH[:3], frame=0
     )
