@@ -3,6 +3,7 @@ a transformation obtained elsewhere."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -118,6 +119,11 @@ def test_multiway_results_and_pose_graphs_round_trip(tmp_path, multiway):
         np.testing.assert_array_equal(a, b)
     assert back.edges == result.edges and back.unconnected == result.unconnected
     assert back.pairs.keys() == result.pairs.keys()
+    # What the report derives from the saved edges and pairs: the same, here none.
+    chain = dataclasses.replace(back, edges=back.edges[:2])
+    assert back.unverified() == result.unverified() == {}
+    assert chain.unverified() == dataclasses.replace(result, edges=result.edges[:2]).unverified()
+    assert sorted(chain.unverified()) == [1, 2]  # 0-1 and 0-2: each a leaf
     assert len(back.pose_graph.edges) == len(result.pose_graph.edges)
     np.testing.assert_array_equal(
         back.pose_graph.edges[0].information, result.pose_graph.edges[0].information
