@@ -115,32 +115,31 @@ def run(args: argparse.Namespace) -> int:
 def _truth(path: str, source: str, target: str):
     """The ground truth of SOURCE onto TARGET: a matrix file's, or for a 3DMatch
     ``.log`` the record of the two fragments (``(i, j)`` maps fragment ``j`` into
-    ``i``, inverted when the source is ``i``) and, with the ``.info`` file beside it,
-    ``(record, its matrix, its information, whether the record maps source into
-    target)`` for the official RMSE (else None)."""
-    from ..datasets.threedmatch import read_gt_info, read_gt_log
+    ``i``, inverted when the source is ``i``) and, with the ``.info`` file beside it
+    (:func:`~o3d_rpointhop.evaluation.rooms.read_truth`), ``(record, its matrix, its
+    information, whether the record maps source into target)`` for the official RMSE
+    (else None)."""
+    from ..datasets.threedmatch import read_gt_log
+    from ..evaluation.rooms import read_truth
     from ..poses import pose_format, read_matrix
 
     if pose_format(path) != "3dmatch":
         return read_matrix(path), None
     why = "no gt.log record can be chosen for it (give --truth a 4x4 matrix file instead)"
     a, b = fragment_number(source, why), fragment_number(target, why)
-    records = read_gt_log(path)
+    if Path(path).with_suffix(".info").is_file():
+        records = read_truth(path)
+    else:
+        records = {pair: (matrix, None) for pair, matrix in read_gt_log(path).items()}
     if (b, a) in records:
         key, forward = (b, a), True
     elif (a, b) in records:
         key, forward = (a, b), False
     else:
         raise CommandError(f"{path} holds no record of fragments {a} and {b}")
-    matrix = records[key]
+    matrix, information = records[key]
     truth = matrix if forward else np.linalg.inv(matrix)
-    info_path = Path(path).with_suffix(".info")
-    if not info_path.is_file():
-        return truth, None
-    information = read_gt_info(info_path).get(key)
-    if information is None:
-        raise CommandError(f"{info_path} holds no record of fragments {key[0]} and {key[1]}")
-    return truth, (key, matrix, information, forward)
+    return truth, None if information is None else (key, matrix, information, forward)
 
 
 def _official(transformation, key, matrix, information, forward) -> dict:
