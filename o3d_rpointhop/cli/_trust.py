@@ -95,7 +95,7 @@ def report_reconstruction(summary: dict, first_scan: str) -> None:
         log.warning(f"{first_scan} is not placed: the poses are in {summary['frame']}'s frame")
     for name, why in summary["left_out"].items():
         log.warning(f"left out: {name}: {why}")
-    unverified = summary.get("unverified", {})
+    unverified = summary["unverified"]
     if unverified:
         log.warning(
             f"{len(unverified)} placed scans are joined to the others by edges no loop of "
