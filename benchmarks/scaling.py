@@ -10,7 +10,10 @@ principal axes (``pretrained(n_components=128)``) and on 32; its full 1624-D
 descriptor is measured too up to 200k points (at 1M its float32 output alone is 6.5
 GB). Two thread budgets, the same for both sides: one thread each (Open3D's
 ``set_max_threads(1)``, ``n_jobs=1``) and every core each (Open3D's default, the
-descriptor's default ``n_jobs=None``).
+descriptor's default ``n_jobs=None``). ``set_max_threads(1)`` is the way to one thread
+that Open3D honours here: ``OMP_NUM_THREADS=1`` and threadpoolctl leave it on every
+core, and pinning the process to one core (``taskset -c 0``) measures the same time
+(``benchmarks/thread_budgets.py``, ``results/thread_budgets.md``).
 
 Up to 20k points every size is measured in ``--rounds`` rounds (3 by default): each
 round runs every method once, in that order, each in a fresh process, and a row keeps
