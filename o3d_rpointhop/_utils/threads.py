@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from contextlib import AbstractContextManager, contextmanager
 
 import open3d as o3d
@@ -30,6 +30,7 @@ __all__ = [
     "kernel_threads",
     "map_threads",
     "run_blocks",
+    "start_beside",
     "one_blas_thread",
     "repeatable_open3d",
     "core_budget",
@@ -166,17 +167,29 @@ def map_threads(func: Callable, items: Sequence, n_threads: int) -> None:
         raise errors[min(errors)]
 
 
-def run_blocks(func: Callable, n: int, n_threads: int, *args, align: int = 1) -> None:
-    """``func(start, stop, *args)`` over ``range(n)`` cut into one contiguous piece per
-    thread, every piece starting at a multiple of ``align`` (for kernels whose work
-    restarts there, so that any cut gives the same result)."""
+def run_blocks(
+    func: Callable, n: int, n_threads: int, *args, align: int = 1, per_thread: int = 1
+) -> None:
+    """``func(start, stop, *args)`` over ``range(n)`` cut into ``per_thread`` contiguous
+    pieces per thread, every piece starting at a multiple of ``align`` (for kernels
+    whose work restarts there, so that any cut gives the same result). More pieces than
+    threads let a thread that joins late (busy with work started by
+    :func:`start_beside`) still take a share."""
     if n <= 0:
         return
     align = max(1, align)
-    pieces = max(1, min(n_threads, _ceil_div(n, align)))
+    pieces = max(1, min(n_threads * max(1, per_thread), _ceil_div(n, align)))
     size = _ceil_div(_ceil_div(n, pieces), align) * align
     bounds = [(start, min(n, start + size), *args) for start in range(0, n, size)]
     map_threads(func, bounds, n_threads)
+
+
+def start_beside(func: Callable, *args) -> Future:
+    """Start ``func(*args)`` on a thread of the process's pool and return its future:
+    the caller works meanwhile (its :func:`map_threads` calls find the pool thread busy
+    until ``func`` returns, and take that thread's items themselves). ``func`` should
+    release the GIL (a ``nogil`` kernel); only worth it with two threads or more."""
+    return _executor(1).submit(func, *args)
 
 
 def _ceil_div(a: int, b: int) -> int:

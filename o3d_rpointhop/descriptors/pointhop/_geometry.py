@@ -35,7 +35,7 @@ import numpy as np
 
 from ..._utils.compiled import kernel
 from ..._utils.kdtree import QUERY_CHUNK
-from ..._utils.threads import run_blocks
+from ..._utils.threads import run_blocks, start_beside
 from ._attributes import eigen_features, fpfh_features
 from ._config import HopConfig
 from ._frames import frame_of
@@ -331,6 +331,7 @@ def _frames_and_full_hops(
             eigenvalues,
             bins,
             hop1,
+            per_thread=4,
         )
         for h in kept:
             k = config.n_neighbors[h]
@@ -401,13 +402,32 @@ def build_geometry(
             None, k_search, levels, n_mean=config.lrf_neighbors - 1, n_threads=n_threads
         )
         found, graph = (neighbours, mean_dist), (neighbours, reach)
-    drawn = hop_subsets(points, sizes if for_fit else sizes[:-1], method, graph, n_threads, ranks)
-    samples = [_whole(s, n) for s in drawn]
+    drawn_sizes = sizes if for_fit else sizes[:-1]
+    if method == "fps" and n_threads > 1 and sizes[0] == n:
+        # FPS is serial and the frames pass needs none of its picks (hop 1 describes
+        # every point): the pass runs on the other threads meanwhile, keeping the
+        # full hops' neighbours of every row, which the samples then select.
+        sampling = start_beside(hop_subsets, points, drawn_sizes, method, graph, 1, ranks)
+        try:
+            everyone: list[np.ndarray | None] = [None] * n_hops
+            frames, eigenvalues, mean_dist, hop1, stored = _frames_and_full_hops(
+                points, config, search, k_search, full, everyone, viewpoint, n_threads, found
+            )
+        finally:
+            drawn = sampling.result()
+        samples = [_whole(s, n) for s in drawn]
+        queries = samples if for_fit else samples + [None]
+        for h, (neighbours, bins) in stored.items():
+            if queries[h] is not None:
+                stored[h] = (neighbours[queries[h]], bins[queries[h]])
+    else:
+        drawn = hop_subsets(points, drawn_sizes, method, graph, n_threads, ranks)
+        samples = [_whole(s, n) for s in drawn]
+        queries = samples if for_fit else samples + [None]
+        frames, eigenvalues, mean_dist, hop1, stored = _frames_and_full_hops(
+            points, config, search, k_search, full, queries, viewpoint, n_threads, found
+        )
     sources = [None] + samples[: n_hops - 1]
-    queries = samples if for_fit else samples + [None]
-    frames, eigenvalues, mean_dist, hop1, stored = _frames_and_full_hops(
-        points, config, search, k_search, full, queries, viewpoint, n_threads, found
-    )
     del search  # the whole cloud's tree
     hop1 /= cloud_scale(mean_dist, config.scale)
     hops: list[HopNeighbourhood | None] = [None] * (n_hops - 1)

@@ -106,7 +106,7 @@ def _heap_pop(keys, items, size):  # pragma: no cover - compiled
     return size
 
 
-@kernel()
+@kernel(nogil=True)
 def _farthest_points(
     points, candidates, m, start, neighbours, reach, ranks
 ):  # pragma: no cover - compiled

@@ -123,11 +123,37 @@ def test_threads_give_the_same_descriptors(model, fitted, monkeypatch):
         return original(func, items, n_threads)
 
     monkeypatch.setattr(threads_module, "map_threads", spy)
+    beside = []
+    start = hops.start_beside
+    monkeypatch.setattr(hops, "start_beside", lambda f, *a: beside.append(f) or start(f, *a))
     for n_jobs in (2, 3):
         threaded = model.set_params(n_jobs=n_jobs).transform(cloud)
         np.testing.assert_array_equal(threaded, one)
     model.set_params(n_jobs=None)
     assert calls and all(n >= 2 for _, n in calls) and any(items >= 2 for items, _ in calls)
+    # The farthest point sample was drawn beside the frames pass, and changed nothing.
+    assert len(beside) == 2
+
+
+@pytest.mark.parametrize("for_fit", [True, False])
+def test_samples_drawn_beside_the_frames_pass_give_the_same_geometry(fitted, for_fit, monkeypatch):
+    """On two threads the farthest point sample is drawn while the frames pass runs,
+    which keeps every row's neighbours until the samples select theirs: the same hop
+    structure, to the bit, as on one thread (where the sample comes first)."""
+    config = fitted._hop_config()
+    points = make_blob(700, shape_seed=3)
+    one = hops.build_geometry(points, config, for_fit, n_threads=1)
+    beside = []
+    start = hops.start_beside
+    monkeypatch.setattr(hops, "start_beside", lambda f, *a: beside.append(f) or start(f, *a))
+    two = hops.build_geometry(points, config, for_fit, n_threads=2)
+    assert len(beside) == 1
+    np.testing.assert_array_equal(one.hop1_attributes, two.hop1_attributes)
+    assert len(one.hops) == len(two.hops) >= 2
+    for a, b in zip(one.hops, two.hops, strict=True):
+        np.testing.assert_array_equal(a.neighbours, b.neighbours)
+        np.testing.assert_array_equal(a.bins, b.bins)
+        assert a.n_sources == b.n_sources
 
 
 def test_every_core_by_default_within_the_limits_a_user_sets(monkeypatch):
@@ -197,6 +223,27 @@ def test_map_threads_shares_many_items_between_the_threads():
     assert sorted(k for k, _ in ran) == list(range(12))
     on_caller = sum(caller for _, caller in ran)
     assert 2 <= on_caller <= 10
+
+
+def test_start_beside_runs_beside_the_callers_blocks():
+    """Work started beside holds a pool thread: every block still runs while it is held
+    (the caller takes the busy thread's share), and the future gives the result."""
+    import threading
+
+    from o3d_rpointhop._utils.threads import run_blocks, start_beside
+
+    release = threading.Event()
+    future = start_beside(lambda x: x * 2 if release.wait(30) else None, 21)
+    seen = []
+
+    def block(lo, hi):
+        seen.append((lo, hi, release.is_set()))
+        if len(seen) == 8:
+            release.set()  # every block ran while the pool's thread was held
+
+    run_blocks(block, 100, 2, per_thread=4)
+    assert sorted(seen) == [(lo, min(lo + 13, 100), False) for lo in range(0, 100, 13)]
+    assert future.result(timeout=30) == 42
 
 
 def test_run_blocks_cuts_at_multiples_of_the_alignment():
