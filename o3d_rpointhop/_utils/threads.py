@@ -32,6 +32,7 @@ __all__ = [
     "run_blocks",
     "start_beside",
     "one_blas_thread",
+    "blas_threads",
     "repeatable_open3d",
     "core_budget",
 ]
@@ -78,9 +79,15 @@ def kernel_threads(n_jobs: int | None) -> int:
 
 def one_blas_thread() -> AbstractContextManager:
     """A context in which BLAS runs on one thread (restored on exit)."""
+    return blas_threads(1)
+
+
+def blas_threads(n_threads: int) -> AbstractContextManager:
+    """A context in which BLAS runs on at most ``n_threads`` threads (restored on
+    exit)."""
     if not _CONTROLLER:
         _CONTROLLER.append(ThreadpoolController())  # inspects the loaded libraries once
-    return _CONTROLLER[0].limit(limits=1, user_api="blas")
+    return _CONTROLLER[0].limit(limits=max(1, int(n_threads)), user_api="blas")
 
 
 @contextmanager
@@ -104,16 +111,18 @@ def repeatable_open3d() -> Iterator[None]:
 @contextmanager
 def core_budget(n_jobs: int | None) -> Iterator[None]:
     """Run the enclosed work on ``n_jobs`` cores: the compiled kernels and joblib tasks
-    of every component whose own ``n_jobs`` is None (``joblib.parallel_config``), and
-    Open3D's threads (normals, k-d tree searches). ``None`` changes nothing: every core,
-    or what an enclosing ``parallel_config`` says; ``-1`` is every core."""
+    of every component whose own ``n_jobs`` is None (``joblib.parallel_config``),
+    Open3D's threads (normals, k-d tree searches) and BLAS's (the descriptor matches'
+    products). ``None`` changes nothing: every core, or what an enclosing
+    ``parallel_config`` says; ``-1`` is every core."""
     if n_jobs is None:
         yield
         return
+    cores = max(1, min(effective_n_jobs(n_jobs), available_threads()))
     previous = o3d.utility.get_max_threads()
-    o3d.utility.set_max_threads(max(1, min(effective_n_jobs(n_jobs), available_threads())))
+    o3d.utility.set_max_threads(cores)
     try:
-        with parallel_config(n_jobs=n_jobs):
+        with parallel_config(n_jobs=n_jobs), blas_threads(cores):
             yield
     finally:
         o3d.utility.set_max_threads(previous)

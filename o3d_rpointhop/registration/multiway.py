@@ -39,7 +39,7 @@ from sklearn.base import clone
 from .._utils.geometry import vectors
 from .._utils.parallel import parallel_map, worker_copy
 from .._utils.params import HasMethods, Interval, StrOptions, validate_params
-from .._utils.threads import repeatable_open3d
+from .._utils.threads import core_budget, repeatable_open3d
 from .._utils.validation import as_points, as_viewpoints, renamed_seed
 from ..descriptors import PRETRAINED_MODELS
 from ..transforms import from_centred
@@ -447,8 +447,9 @@ def register_multiway(
         the compiled kernels' threads. An int ``k``: ``k`` joblib processes of one
         thread each, over the scans' descriptors, the screening of candidate pairs and
         the refinement of kept edges (a Dask cluster under
-        ``joblib.parallel_config(backend="dask")``); ``-1``: every core. The result does
-        not depend on it.
+        ``joblib.parallel_config(backend="dask")``), and this process's own work on
+        ``k`` cores (``1``: everything on one core, Open3D and BLAS included); ``-1``:
+        every core. The result does not depend on it.
     progress : bool, default=None
         A bar on stderr over the pairs (``None``: when stderr is a terminal).
     random_state : int, default=0
@@ -476,6 +477,40 @@ def register_multiway(
     ValueError
         For fewer than two clouds, or a cloud that is not a valid point cloud.
     """
+    with core_budget(n_jobs):
+        return _register_multiway(
+            clouds,
+            descriptor,
+            viewpoints,
+            global_method,
+            voxel_size,
+            n_global_points,
+            min_fitness,
+            max_violation,
+            n_jobs,
+            progress,
+            renamed_seed(random_state, seed, "register_multiway"),
+            settings,
+            sequential,
+        )
+
+
+def _register_multiway(
+    clouds,
+    descriptor,
+    viewpoints,
+    global_method,
+    voxel_size,
+    n_global_points,
+    min_fitness,
+    max_violation,
+    n_jobs,
+    progress,
+    seed,
+    settings,
+    sequential,
+) -> MultiwayResult:
+    """:func:`register_multiway`'s work, inside the caller's core budget."""
     start = time.perf_counter()
     if len(clouds) < 2:
         raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
@@ -485,7 +520,6 @@ def register_multiway(
         descriptor, choice = chosen_model(descriptor, choice)
     views = as_viewpoints(viewpoints, len(points))
     n = len(points)
-    seed = renamed_seed(random_state, seed, "register_multiway")
     # The scans in a canonical order, by content: the same files in any order give the
     # same pairs, in the same directions, and the same poses. canon[c]: the given
     # index of the scan at canonical place c.

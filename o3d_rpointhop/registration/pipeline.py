@@ -122,8 +122,9 @@ class RegistrationPipeline(_BaseComposition):
         down (its up more than 90 degrees from the target's). For data that has an up
         (a LiDAR's z, a handheld camera's -y); off by default.
     n_jobs : int, default=None
-        Cores the registration may use: the threads of the compiled kernels and of
-        Open3D's searches, for every step and descriptor whose own ``n_jobs`` is None.
+        Cores the registration may use: the threads of the compiled kernels, of
+        Open3D's searches and of BLAS (the descriptor matches' products), for every
+        step and descriptor whose own ``n_jobs`` is None.
         ``None``: every core (within an enclosing ``joblib.parallel_config``); ``-1``:
         every core; the result does not depend on it.
 
@@ -588,8 +589,9 @@ def register(
     up : None, array-like of shape (3,) or (array-like, array-like), default=None
         See :class:`RegistrationPipeline`.
     n_jobs : int, default=None
-        Cores the registration may use: the threads of the compiled kernels and of
-        Open3D's searches, for every step and descriptor whose own ``n_jobs`` is None.
+        Cores the registration may use: the threads of the compiled kernels, of
+        Open3D's searches and of BLAS (the descriptor matches' products), for every
+        step and descriptor whose own ``n_jobs`` is None.
         ``None``: every core (within an enclosing ``joblib.parallel_config``); ``-1``:
         every core; the result does not depend on it.
     seed : int, default=None

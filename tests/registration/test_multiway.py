@@ -113,6 +113,30 @@ def test_parallel_pairs_give_the_same_poses():
         np.testing.assert_array_equal(a, b)
 
 
+def test_n_jobs_one_is_one_core_and_the_same_poses(monkeypatch):
+    """``n_jobs=1``: one process on one core (the kernels, Open3D and BLAS), the same
+    bytes as every core; the caller's settings are back afterwards."""
+    import o3d_rpointhop.registration.multiway as multiway
+    from o3d_rpointhop._utils.threads import kernel_threads
+
+    scans, _ = partial_views(3, seed=3)
+    every = register_multiway(scans, random_state=0)
+    seen = []
+    work = multiway._register_multiway
+
+    def spy(*args):
+        seen.append((kernel_threads(None), o3d.utility.get_max_threads()))
+        return work(*args)
+
+    monkeypatch.setattr(multiway, "_register_multiway", spy)
+    before = o3d.utility.get_max_threads()
+    one = register_multiway(scans, random_state=0, n_jobs=1)
+    assert seen == [(1, 1)] and o3d.utility.get_max_threads() == before
+    assert one.edges == every.edges
+    for a, b in zip(one.poses, every.poses, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.slow
 def test_pairs_on_a_dask_cluster_give_the_same_poses():
     """Screening and refinement as tasks of a Dask cluster of two worker processes

@@ -235,14 +235,21 @@ def test_n_jobs_is_the_cores_of_the_whole_registration(object_model):
     """``register(n_jobs=1)`` runs the kernels and Open3D on one core, gives the same
     bytes as every core, and leaves Open3D's thread count as it found it."""
     import open3d as o3d
+    from threadpoolctl import threadpool_info
 
     from o3d_rpointhop._utils.threads import core_budget, kernel_threads
 
+    def blas() -> list[int]:
+        return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
     before = o3d.utility.get_max_threads()
+    blas_before = blas()
     with core_budget(1):
         assert kernel_threads(None) == 1
         assert o3d.utility.get_max_threads() == 1
+        assert blas() and set(blas()) == {1}  # the matches' products too
     assert o3d.utility.get_max_threads() == before
+    assert blas() == blas_before
     cloud = make_object(800, shape_seed=3)
     moved = cloud @ np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]).T + 0.2
     one = register(moved, cloud, object_model, global_method="consensus", n_jobs=1)
