@@ -3,11 +3,15 @@
 Verifying registration hypotheses asks, for tens of thousands of moved points, whether
 a target point lies within a fixed distance and which is nearest. A k-d tree walks
 down from its root for every query; a grid whose cells are as wide as the radius
-answers from the 27 cells around the query, a few points each. The answers are
+answers from the 27 cells around the query, a few points each. Where the cells would
+hold many points (a dense scan searched at a wide radius: hundreds per cell), they are
+``m`` times narrower (:data:`MAX_REACH` at most) and the search walks the cells ring by
+ring around the query's, skipping every column of cells, and every cell of a column,
+that lies farther than the nearest point found so far. The answers are
 ``scipy.spatial.cKDTree.query(queries, distance_upper_bound=radius)``'s: the same
 distances to the bit (each squared distance summed ``(dx^2 + dy^2) + dz^2`` and
 compared strictly below ``radius**2``, as scipy does) and the same nearest point but
-for exact ties.
+for exact ties, which go to the point first in the grid's order, on any grid.
 """
 
 from __future__ import annotations
@@ -23,37 +27,94 @@ __all__ = ["CellGrid", "nearest_one"]
 #: than that, relative to the radius, are searched with a k-d tree instead.
 MAX_CELLS = 1 << 22
 
-# Cells a hair wider than the radius: a pair closer than the radius then never lies
-# two cells apart along an axis, whatever the division's rounding.
+#: Most cells per radius along an axis (``m``): a dense grid's cells are ``radius / m``
+#: wide, ``m`` chosen so that an occupied cell holds about :data:`DENSE_CELL` points.
+MAX_REACH = 4
+#: Points an occupied cell as wide as the radius holds, on average, above which the
+#: cells are made narrower (to hold about a quarter as many).
+DENSE_CELL = 32
+
+# Cells a hair wider than the radius (over ``m``): a pair closer than the radius then
+# never lies more than ``m`` cells apart along an axis, whatever the division's rounding.
 _WIDEN = 1.0 + 1e-9
 
 
 @kernel(inline="always")
 def nearest_one(qx, qy, qz, points, starts, lo, inv_cell, dims, sq_radius):  # pragma: no cover
     """The squared distance to and row of the nearest of ``points`` (sorted by cell,
-    ``starts`` the first row of every cell in C order over ``dims`` and one past the
+    ``starts`` the first row of every cell in C order over ``dims[:3]`` and one past the
     last) strictly closer than ``sq_radius`` to the query ``(qx, qy, qz)``; ``-1`` for
-    none. A helper for kernels that search one point at a time."""
-    nx, ny, nz = dims[0], dims[1], dims[2]
+    none; of equally near points, the first row. ``dims[3]``: the cells per radius
+    (``m``; 1: the 27 cells around the query's). A helper for kernels that search one
+    point at a time."""
+    nx, ny, nz, m = dims[0], dims[1], dims[2], dims[3]
     fx = np.floor((qx - lo[0]) * inv_cell)
     fy = np.floor((qy - lo[1]) * inv_cell)
     fz = np.floor((qz - lo[2]) * inv_cell)
     best = sq_radius
     found = -1
-    if not (-1.0 <= fx <= nx and -1.0 <= fy <= ny and -1.0 <= fz <= nz):
+    if not (-m <= fx <= nx + m - 1 and -m <= fy <= ny + m - 1 and -m <= fz <= nz + m - 1):
         return best, found  # far outside the grid (or not a number)
     cx, cy, cz = int(fx), int(fy), int(fz)
-    for x in range(max(cx - 1, 0), min(cx + 2, nx)):
-        for y in range(max(cy - 1, 0), min(cy + 2, ny)):
-            row = (x * ny + y) * nz
-            for j in range(starts[row + max(cz - 1, 0)], starts[row + min(cz + 2, nz)]):
-                dx = qx - points[j, 0]
-                dy = qy - points[j, 1]
-                dz = qz - points[j, 2]
-                d = (dx * dx + dy * dy) + dz * dz
-                if d < best:
-                    best = d
-                    found = j
+    if m == 1:
+        for x in range(max(cx - 1, 0), min(cx + 2, nx)):
+            for y in range(max(cy - 1, 0), min(cy + 2, ny)):
+                row = (x * ny + y) * nz
+                for j in range(starts[row + max(cz - 1, 0)], starts[row + min(cz + 2, nz)]):
+                    dx = qx - points[j, 0]
+                    dy = qy - points[j, 1]
+                    dz = qz - points[j, 2]
+                    d = (dx * dx + dy * dy) + dz * dz
+                    if d < best:
+                        best = d
+                        found = j
+        return best, found
+    return _nearest_in_rings(qx, qy, qz, cx, cy, cz, points, starts, inv_cell, dims, best)
+
+
+@kernel()
+def _nearest_in_rings(
+    qx, qy, qz, cx, cy, cz, points, starts, inv_cell, dims, best
+):  # pragma: no cover - compiled
+    """:func:`nearest_one` on narrow cells (``dims[3]`` = m > 1) for a query in cell
+    ``(cx, cy, cz)``; compiled once, not into every kernel that searches."""
+    nx, ny, nz, m = dims[0], dims[1], dims[2], dims[3]
+    found = -1
+    # Ring by ring of columns around the query's. A cell ``k`` cells away along an
+    # axis is at least ``(k - 1) * step`` away along it (``step``: the radius over m,
+    # a hair under the cells' width); a column or cell whose bound is beyond the best
+    # so far holds no nearer point, nor one as near (the bound is strictly under every
+    # distance), so skipping it changes nothing, and ties go to the first row whatever
+    # the order the cells are read in.
+    step = 1.0 / (inv_cell * _WIDEN)
+    for ring in range(m + 1):
+        if ring >= 2:
+            gap = (ring - 1) * step
+            if gap * gap > best:
+                break
+        for x in range(max(cx - ring, 0), min(cx + ring + 1, nx)):
+            ax = abs(x - cx)
+            gx = max(ax - 1, 0) * step
+            for y in range(max(cy - ring, 0), min(cy + ring + 1, ny)):
+                ay = abs(y - cy)
+                if max(ax, ay) != ring:
+                    continue
+                gy = max(ay - 1, 0) * step
+                column = gx * gx + gy * gy
+                if column > best:
+                    continue
+                reach = min(m, int(np.sqrt(best - column) / step) + 1)
+                row = (x * ny + y) * nz
+                z0 = min(max(cz - reach, 0), nz)
+                z1 = max(min(cz + reach + 1, nz), z0)
+                for j in range(starts[row + z0], starts[row + z1]):
+                    dx = qx - points[j, 0]
+                    dy = qy - points[j, 1]
+                    dz = qz - points[j, 2]
+                    d = (dx * dx + dy * dy) + dz * dz
+                    if d < best or (d == best and found >= 0 and j < found):
+                        best = d
+                        found = j
     return best, found
 
 
@@ -84,6 +145,34 @@ def _nearest_in_cells(
     return dist, index
 
 
+def _cells(points: np.ndarray, lo: np.ndarray, inv_cell: float):
+    """Every point's cell at ``inv_cell`` cells per unit, as ``(linear index, dims,
+    points per cell)``; None when the grid would exceed :data:`MAX_CELLS`."""
+    cells = np.floor((points - lo) * inv_cell)  # float: no integer overflow yet
+    extent = cells.max(axis=0) + 1 if len(points) else np.ones(3)
+    if float(np.prod(extent)) > MAX_CELLS:
+        return None
+    keys = cells.astype(np.int64)
+    dims = extent.astype(np.int64)
+    linear = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
+    return linear, dims, np.bincount(linear, minlength=int(np.prod(dims)))
+
+
+def _reach(linear: np.ndarray, dims: np.ndarray, counts: np.ndarray) -> int:
+    """Cells per radius for points that fill ``counts`` cells as wide as the radius: 1
+    while an occupied cell holds at most :data:`DENSE_CELL` points on average, else
+    enough narrower cells (a surface's points per cell fall with its square) to hold
+    about a quarter of that, within :data:`MAX_REACH` and :data:`MAX_CELLS`."""
+    occupied = int(np.count_nonzero(counts))
+    per_cell = len(linear) / max(occupied, 1)
+    if per_cell <= DENSE_CELL:
+        return 1
+    reach = min(MAX_REACH, int(np.ceil(np.sqrt(4.0 * per_cell / DENSE_CELL))))
+    while reach > 1 and float(np.prod(dims.astype(np.float64) * reach)) > MAX_CELLS:
+        reach -= 1
+    return reach
+
+
 class CellGrid:
     """Each query's nearest point closer than ``radius``, looked up on a grid of cells.
 
@@ -101,26 +190,30 @@ class CellGrid:
         self.radius = float(radius)
         self.n_points = len(points)
         lo = points.min(axis=0) if len(points) else np.zeros(3)
-        inv_cell = 1.0 / (self.radius * _WIDEN)
-        cells = np.floor((points - lo) * inv_cell)  # float: no integer overflow yet
-        extent = cells.max(axis=0) + 1 if len(points) else np.ones(3)
         self._tree = None
-        if float(np.prod(extent)) > MAX_CELLS:
+        cells = _cells(points, lo, 1.0 / (self.radius * _WIDEN))
+        if cells is None:
             self._tree = cKDTree(points)
             return
-        keys = cells.astype(np.int64)
-        dims = extent.astype(np.int64)
-        linear = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
+        reach = _reach(*cells)
+        if reach > 1:
+            cells = _cells(points, lo, reach / (self.radius * _WIDEN))
+        linear, dims, counts = cells
         order = np.argsort(linear, kind="stable")
-        counts = np.bincount(linear, minlength=int(np.prod(dims)))
         starts = np.zeros(len(counts) + 1, dtype=np.int64)
         np.cumsum(counts, out=starts[1:])
         self._order = order
         self._sorted = np.ascontiguousarray(points[order])
         self._starts = starts
         self._lo = lo
-        self._inv_cell = inv_cell
-        self._dims = dims
+        self._inv_cell = reach / (self.radius * _WIDEN)
+        self._dims = np.array([*dims, reach], dtype=np.int64)
+
+    @property
+    def reach(self) -> int:
+        """Cells per radius along an axis (1: cells as wide as the radius); a grid
+        :attr:`on_cells`."""
+        return int(self._dims[3]) if self._tree is None else 0
 
     @property
     def on_cells(self) -> bool:

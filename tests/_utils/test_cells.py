@@ -81,3 +81,73 @@ def test_a_radius_tiny_against_the_cloud_takes_the_tree():
     expected_dist, expected_index = _tree_answer(points, queries, 1e-7)
     np.testing.assert_array_equal(dist, expected_dist)
     np.testing.assert_array_equal(index, expected_index)
+
+
+def _dense_sheet(n: int, seed: int) -> np.ndarray:
+    """A wavy sheet sampled far more densely than the radii below."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(0, 1, (n, 2))
+    return np.c_[u, 0.02 * np.sin(6 * u[:, 0])]
+
+
+@pytest.mark.parametrize("radius", [0.05, 0.12])
+def test_a_dense_cloud_gets_narrower_cells_and_the_same_answers(radius):
+    """Hundreds of points per radius-wide cell: the grid takes cells a few times
+    narrower and searches them ring by ring; the distances are the tree's to the bit,
+    and so is the neighbour wherever the nearest is unique (queries on, near, above
+    and beside the sheet, and outside the grid by up to the cells per radius)."""
+    rng = np.random.default_rng(7)
+    points = _dense_sheet(20_000, 7)
+    points = np.concatenate([points, points[:300]])  # exact duplicates: ties
+    grid = CellGrid(points, radius)
+    assert grid.reach > 1
+    picks = points[rng.integers(len(points), size=3000)]
+    queries = np.concatenate(
+        [
+            picks + rng.normal(scale=radius / 4, size=picks.shape),
+            picks + [0.0, 0.0, 0.8 * radius],  # nearest far into the radius
+            picks + [0.0, 0.0, 1.1 * radius],  # near the sheet, none within
+            rng.uniform(-2 * radius, 1 + 2 * radius, (3000, 3)),  # around and outside
+            points[:300],  # on the duplicated points
+        ]
+    )
+    dist, index = grid.nearest(queries)
+    expected_dist, expected_index = _tree_answer(points, queries, radius)
+    np.testing.assert_array_equal(dist, expected_dist)
+    differ = index != expected_index
+    # Only ties may pick another point, at the same distance.
+    np.testing.assert_array_equal(
+        np.linalg.norm(points[index[differ]] - queries[differ], axis=1), dist[differ]
+    )
+    assert differ.sum() <= 300
+    assert 0 < np.isfinite(dist).sum() < len(queries)
+
+
+def test_ties_go_to_the_first_point_in_the_grid_on_dense_grids_too(monkeypatch):
+    """Among equally near points the one first in the grid's order wins, whatever the
+    order the narrow cells are read in: the same neighbour as a scan of every point in
+    that order."""
+    points = _dense_sheet(20_000, 8)
+    points = np.concatenate([points, points[::7], points[::11]])  # duplicated twice
+    grid = CellGrid(points, 0.1)
+    assert grid.reach > 1
+    queries = points[::5] + 1e-4
+    _, index = grid.nearest(queries)
+    sorted_rows = grid.order
+    position = np.empty(len(points), dtype=np.int64)
+    position[sorted_rows] = np.arange(len(points))
+    # Every point at the nearest distance, the first of them in the grid's order.
+    for q, found in zip(queries[::50], index[::50], strict=True):
+        d = np.linalg.norm(points - q, axis=1)
+        diff = points - q
+        squared = (diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1]) + diff[:, 2] * diff[:, 2]
+        tied = np.flatnonzero(squared == squared.min())
+        assert found == tied[np.argmin(position[tied])]
+        assert d[found] == d.min()
+
+
+def test_sparse_clouds_keep_cells_as_wide_as_the_radius():
+    rng = np.random.default_rng(9)
+    points = rng.normal(size=(2000, 3))
+    assert CellGrid(points, 0.3).reach == 1
+    assert CellGrid(_dense_sheet(20_000, 9), 0.01).reach == 1  # a few points a cell

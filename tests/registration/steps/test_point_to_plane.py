@@ -201,3 +201,24 @@ def test_the_step_runs_compiled_and_falls_back_to_open3d_on_a_wide_target(monkey
     # both undo the start's motion
     residual = compiled.transformation @ start
     assert np.abs(residual[:3, 3]).max() < 5e-3
+
+
+def test_a_dense_target_on_narrow_cells_gives_the_same_poses(monkeypatch):
+    """A target far denser than the correspondence distance is searched on narrower
+    cells (:data:`~o3d_rpointhop._utils.cells.DENSE_CELL`): the same poses, to the
+    bit, as on cells as wide as the distance."""
+    points = make_object(30_000, shape_seed=2, sample_seed=2)
+    target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.1, max_nn=30))
+    source = points[::13]
+    starts = _starts(np.eye(4), 3, seed=5)
+    distance = 0.2
+    narrow = CellGrid(points, distance)
+    monkeypatch.setattr(cells, "DENSE_CELL", 10**9)
+    wide = CellGrid(points, distance)
+    assert narrow.reach > 1 and wide.reach == 1
+    normals = np.asarray(target.normals)
+    np.testing.assert_array_equal(
+        refine_point_to_plane(source, narrow, normals, starts, 10),
+        refine_point_to_plane(source, wide, normals, starts, 10),
+    )
