@@ -197,7 +197,13 @@ def start_beside(func: Callable, *args) -> Future:
     """Start ``func(*args)`` on a thread of the process's pool and return its future:
     the caller works meanwhile (its :func:`map_threads` calls find the pool thread busy
     until ``func`` returns, and take that thread's items themselves). ``func`` should
-    release the GIL (a ``nogil`` kernel); only worth it with two threads or more."""
+    release the GIL (a ``nogil`` kernel); only worth it with two threads or more. In a
+    thread of the pool itself it runs at once (it would otherwise wait for a thread
+    that may be the caller)."""
+    if threading.current_thread().name.startswith(_PREFIX):
+        done: Future = Future()
+        done.set_result(func(*args))
+        return done
     return _executor(1).submit(func, *args)
 
 

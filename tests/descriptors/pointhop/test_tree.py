@@ -246,6 +246,20 @@ def test_start_beside_runs_beside_the_callers_blocks():
     assert future.result(timeout=30) == 42
 
 
+def test_start_beside_inside_the_pool_runs_at_once():
+    """Started from a thread of the pool, the work runs in that thread at once: no
+    wait for a pool thread that may be the caller."""
+    from o3d_rpointhop._utils.threads import map_threads, start_beside
+
+    results = []
+
+    def item(k):
+        results.append(start_beside(lambda x: x + 1, k).result(timeout=30))
+
+    map_threads(item, [(k,) for k in range(6)], 2)
+    assert sorted(results) == [1, 2, 3, 4, 5, 6]
+
+
 def test_run_blocks_cuts_at_multiples_of_the_alignment():
     from o3d_rpointhop._utils.threads import run_blocks
 
