@@ -123,7 +123,7 @@ def test_a_dense_cloud_gets_narrower_cells_and_the_same_answers(radius):
     assert 0 < np.isfinite(dist).sum() < len(queries)
 
 
-def test_ties_go_to_the_first_point_in_the_grid_on_dense_grids_too(monkeypatch):
+def test_ties_go_to_the_first_point_in_the_grid_on_dense_grids_too():
     """Among equally near points the one first in the grid's order wins, whatever the
     order the narrow cells are read in: the same neighbour as a scan of every point in
     that order."""
