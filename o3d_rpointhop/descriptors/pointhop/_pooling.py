@@ -23,6 +23,9 @@ depend on the number of threads.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from ..._utils.compiled import kernel
@@ -37,6 +40,7 @@ __all__ = [
     "pool",
     "pool_project",
     "pool_saab",
+    "remembered",
 ]
 
 #: Rows of one matrix product in :func:`matmul_blocks`: a fixed size, so that a row's
@@ -205,22 +209,36 @@ def folded_projection(
     and its ``components``, not copies) and the same number of axes give the same
     folded map without computing it again (about 1 ms for the object model, a fortieth
     of describing 2k points)."""
-    model = (kernels, means, selected, components)
-    key = (*map(id, model), axes.shape[1], first_hop)
-    hit = _FOLDS.get(key)
-    if hit is not None and all(a is b for a, b in zip(hit[0], model, strict=True)):
-        return hit[1]
     fold = fold_first_hop if first_hop else fold_projection
-    folded = fold(kernels, means, selected, centre, axes)
-    _FOLDS[key] = (model, folded)
-    while len(_FOLDS) > _FOLDS_KEPT:
-        del _FOLDS[next(iter(_FOLDS))]
-    return folded
+    return remembered(
+        _FOLDS,
+        (kernels, means, selected, components),
+        (axes.shape[1], first_hop),
+        lambda: fold(kernels, means, selected, centre, axes),
+    )
 
 
 #: Folded maps kept (each holds its model's arrays alive, about 1 MB for 128 axes).
-_FOLDS_KEPT = 4
 _FOLDS: dict = {}
+
+
+def remembered(cache: dict, arrays: tuple, extra: tuple, compute: Callable[[], Any]) -> Any:
+    """``compute()``, remembered in ``cache`` for the same ``arrays`` (the same objects,
+    not equal copies: a fitted model's) and ``extra``; beyond :data:`REMEMBERED` entries
+    the oldest is dropped (each holds its arrays alive)."""
+    key = (*map(id, arrays), *extra)
+    hit = cache.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], arrays, strict=True)):
+        return hit[1]
+    value = compute()
+    cache[key] = (arrays, value)
+    while len(cache) > REMEMBERED:
+        del cache[next(iter(cache))]
+    return value
+
+
+#: Entries a :func:`remembered` cache keeps: the last few models.
+REMEMBERED = 4
 
 
 def fold_projection(

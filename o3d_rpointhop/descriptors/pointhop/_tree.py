@@ -20,7 +20,14 @@ from ._config import HopConfig
 from ._geometry import CloudGeometry, HopNeighbourhood, build_geometry
 from ._neighbors import spatial_order
 from ._octants import N_OCTANTS
-from ._pooling import folded_projection, matmul_blocks, pool, pool_project, pool_saab
+from ._pooling import (
+    folded_projection,
+    matmul_blocks,
+    pool,
+    pool_project,
+    pool_saab,
+    remembered,
+)
 from ._saab import MomentAccumulator, apply_saab, fit_saab
 from ._turns import octant_turn, turn_hop1
 
@@ -42,9 +49,19 @@ FOLD_BYTES = 128 * 1024**2
 UNFOLDED_ROWS = 4096
 
 
-#: Projections kept by :meth:`HopTree.projection` (each holds its model's axes alive).
-_PROJECTIONS_KEPT = 4
+#: Projections :meth:`HopTree.projection` remembers (each holds its model's axes alive).
 _PROJECTIONS: dict = {}
+
+
+def _float32_projection(components, pca_mean, n_components: int):
+    """``(mean, axes.T)`` in float32, read-only (they are shared between calls)."""
+    # float32: 3.4x faster than float64 and, by the contract, the rows may differ in
+    # the last float32 places with their position in the BLAS kernel's tiles.
+    axes = np.ascontiguousarray(components[:n_components].T, dtype=np.float32)
+    axes.setflags(write=False)
+    centre = pca_mean.astype(np.float32)
+    centre.setflags(write=False)
+    return centre, axes
 
 
 @dataclass
@@ -218,20 +235,12 @@ class HopTree:
             )
         # Remembered for the same arrays: the transposed copy of 128 axes costs about
         # a fortieth of describing 2k points, and every transform asks twice.
-        key = (id(self.components), id(self.pca_mean), int(n_components))
-        hit = _PROJECTIONS.get(key)
-        if hit is not None and hit[0] is self.components and hit[1] is self.pca_mean:
-            return hit[2]
-        # float32: 3.4x faster than float64 and, by the contract, the rows may differ in
-        # the last float32 places with their position in the BLAS kernel's tiles.
-        axes = np.ascontiguousarray(self.components[:n_components].T, dtype=np.float32)
-        axes.setflags(write=False)
-        centre = self.pca_mean.astype(np.float32)
-        centre.setflags(write=False)
-        _PROJECTIONS[key] = (self.components, self.pca_mean, (centre, axes))
-        while len(_PROJECTIONS) > _PROJECTIONS_KEPT:
-            del _PROJECTIONS[next(iter(_PROJECTIONS))]
-        return centre, axes
+        return remembered(
+            _PROJECTIONS,
+            (self.components, self.pca_mean),
+            (int(n_components),),
+            lambda: _float32_projection(self.components, self.pca_mean, n_components),
+        )
 
     # ------------------------------------------------------------------ forward pass
     def hop(
