@@ -196,8 +196,11 @@ class CellGrid:
             self._tree = cKDTree(points)
             return
         reach = _reach(*cells)
-        if reach > 1:
-            cells = _cells(points, lo, reach / (self.radius * _WIDEN))
+        narrow = _cells(points, lo, reach / (self.radius * _WIDEN)) if reach > 1 else None
+        if narrow is None:  # rounding could put the narrow grid over MAX_CELLS
+            reach = 1
+        else:
+            cells = narrow
         linear, dims, counts = cells
         order = np.argsort(linear, kind="stable")
         starts = np.zeros(len(counts) + 1, dtype=np.int64)
