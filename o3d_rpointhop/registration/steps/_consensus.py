@@ -12,8 +12,9 @@ largest, densest cluster. The kernel
    when there are fewer);
 3. grows each seed ``i`` into a consensus set by second-order compatibility,
    ``SC2[i, j] = C[i, j] * |N(i) & N(j)|``, the number of matches compatible with both
-   (a popcount of two rows), which separates a true cluster from matches that agree
-   with the seed by chance; the set is the seed and its ``set_size`` best partners;
+   (a popcount of two rows, taken once for two seeds: ``SC2`` is symmetric), which
+   separates a true cluster from matches that agree with the seed by chance; the set
+   is the seed and its ``set_size`` best partners;
 4. fits one rigid motion per set by a weighted SVD (weights: the SC2 scores);
 5. scores every hypothesis on the matches, as the published estimators do, rather than
    on the whole clouds: a truncated quadratic, ``sum(max(0, 1 - r^2 / tau^2))`` over the
@@ -22,8 +23,8 @@ largest, densest cluster. The kernel
 6. refits the winner on its inliers while that gathers more of them.
 
 Steps 1, 3 and 5 are compiled (numba, :mod:`o3d_rpointhop._utils.compiled`) and run
-on ``n_threads`` threads: the graph's rows, the seeds' blocks and the hypotheses'
-blocks are shared out, each row, set and sum computed in one fixed order, so the
+on ``n_threads`` threads: the graph's rows, the seeds and the hypotheses' blocks
+are shared out, each row, set and sum computed in one fixed order, so the
 result does not depend on the thread count. Deterministic: no random draw; ties go to
 the lower index.
 """
@@ -63,6 +64,12 @@ __all__ = [
 PREEMPT_STRIDE = 8
 PREEMPT_KEEP = 256
 PREEMPT_MIN_SAMPLE = 64
+#: The compatibility graphs' rows are whole multiples of this many 64-bit words (zero
+#: beyond the matches): one 512-bit vector.
+ROW_ALIGN = 8
+#: Partners :func:`consensus_sets` lists at once (8 bytes each), about: further seeds
+#: are taken in further runs.
+SETS_ENTRIES = 1 << 23
 
 
 @dataclass
@@ -110,9 +117,9 @@ def _compatibility_bits(
     pair is masked: its lengths sum to less than ``min_span`` (too close on both sides
     to say anything about a rotation) or the two matches share a source or a target
     point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Writes the
-    blocks of 64 rows ``start:stop`` of both graphs ``bits`` and ``second`` ``(m,
-    ceil(m / 64))`` uint64 (the same array when the thresholds are equal) and of the
-    first graph's degrees.
+    blocks of 64 rows ``start:stop`` of both graphs ``bits`` and ``second`` (uint64, ``m``
+    rows of at least ``ceil(m / 64)`` words, the same array when the thresholds are
+    equal; the words beyond are left as they are) and of the first graph's degrees.
 
     Every row is built on its own: its lengths first (one pass over the matches, in
     SIMD lanes), then its words. Each pair is measured from both ends, with the same
@@ -161,59 +168,128 @@ def _compatibility_bits(
 
 
 @kernel(nogil=True)
-def _consensus_sets(
-    start, stop, bits, second, seeds, set_size, members, scores
-):  # pragma: no cover - compiled
-    """For every seed, its ``set_size`` partners (compatible with it in ``bits``) with
-    the highest second-order compatibility, the number of matches compatible with both
-    in ``second`` (ties: the lower index), and those scores; a seed with fewer
-    compatible matches is padded with itself at score 0.
+def _row_starts(bits, seeds):  # pragma: no cover - compiled
+    """Where each seed's compatible matches start in the flat lists of
+    :func:`_shared_counts` (the seeds' degrees in ``bits``, summed), and their total."""
+    out = np.zeros(seeds.shape[0] + 1, dtype=np.int64)
+    for s in range(seeds.shape[0]):
+        count = 0
+        for w in range(bits.shape[1]):
+            count += popcount(bits[seeds[s], w])
+        out[s + 1] = out[s] + count
+    return out
 
-    Writes the blocks of 64 seeds ``start:stop`` of ``members`` and ``scores``. A block
-    walks the matches once, in index order, and compares each row of ``second`` with
-    the rows of the block's seeds it is compatible with (every row read once per
-    block, not once per seed). Each seed keeps its best partners so far in order, a
-    newcomer going after the partners it does not beat, which is the order of a stable
-    sort."""
-    m, words = bits.shape
-    n = seeds.shape[0]
+
+@kernel(nogil=True)
+def _shared_counts(
+    start, stop, bits, second, seeds, rank, starts, partners, shared
+):  # pragma: no cover - compiled
+    """For the seeds ``start:stop``: the matches compatible with each in ``bits``, in
+    index order (``partners[starts[s]:starts[s + 1]]``), and for each the number of
+    matches compatible with both in ``second`` (a popcount of the two rows). A pair of
+    two seeds compatible both ways is counted once, from the lower index; the higher's
+    entry is left at -1 for :func:`_mirror_counts` (``rank``: a match's place among the
+    seeds, -1 for none)."""
+    words = bits.shape[1]
     one = np.uint64(1)
-    for block in range(start, stop):
-        first = block * 64
-        size = min(n, first + 64) - first
-        own = seeds[first : first + size]
-        best = np.empty((size, set_size), dtype=np.int64)
-        value = np.empty((size, set_size), dtype=np.int64)
-        kept = np.zeros(size, dtype=np.int64)
-        for j in range(m):
-            word, bit = j >> 6, np.uint64(j & 63)
-            for s in range(size):
-                i = own[s]
-                if not (bits[i, word] >> bit) & one:
-                    continue
-                shared = 0
-                for v in range(words):
-                    shared += popcount(second[i, v] & second[j, v])
-                k = kept[s]
-                if k == set_size and shared <= value[s, k - 1]:
-                    continue
-                # Insert after every kept partner with at least this score.
-                r = k if k < set_size else set_size - 1
-                while r > 0 and value[s, r - 1] < shared:
-                    best[s, r] = best[s, r - 1]
-                    value[s, r] = value[s, r - 1]
-                    r -= 1
-                best[s, r] = j
-                value[s, r] = shared
-                if k < set_size:
-                    kept[s] = k + 1
-        for s in range(size):
-            for r in range(set_size):
-                if r < kept[s]:
-                    members[first + s, r] = best[s, r]
-                    scores[first + s, r] = value[s, r]
+    for s in range(start, stop):
+        i = seeds[s]
+        p = starts[s]
+        for w in range(words):
+            word = bits[i, w]
+            while word:
+                low = word & (~word + one)  # the lowest set bit
+                j = w * 64 + popcount(low - one)
+                word ^= low
+                partners[p] = j
+                if j < i and rank[j] >= 0 and (bits[j, i >> 6] >> np.uint64(i & 63)) & one:
+                    shared[p] = -1
                 else:
-                    members[first + s, r] = own[s]
+                    count = 0
+                    for v in range(second.shape[1]):
+                        count += popcount(second[i, v] & second[j, v])
+                    shared[p] = count
+                p += 1
+
+
+@kernel(nogil=True)
+def _mirror_counts(bits, seeds, rank, starts, partners, shared):  # pragma: no cover
+    """Fill the entries :func:`_shared_counts` left at -1 from the lower seed's entry.
+    The seeds come in increasing index order, so each seed's open entries are met in
+    the order they are listed, and a cursor per seed finds them."""
+    one = np.uint64(1)
+    cursor = starts[:-1].copy()
+    for s in range(seeds.shape[0]):
+        i = seeds[s]
+        for p in range(starts[s], starts[s + 1]):
+            j = partners[p]
+            if j <= i or rank[j] < 0 or not (bits[j, i >> 6] >> np.uint64(i & 63)) & one:
+                continue
+            t = rank[j]
+            c = cursor[t]
+            while c < starts[t + 1] and shared[c] != -1:
+                c += 1
+            shared[c] = shared[p]
+            cursor[t] = c + 1
+
+
+@kernel(nogil=True)
+def _best_partners(
+    start, stop, seeds, starts, partners, shared, set_size, members, scores
+):  # pragma: no cover - compiled
+    """For the seeds ``start:stop``: the ``set_size`` partners with the most common
+    neighbours, most first, of equal ones the lower index (a stable sort's order),
+    and their counts; a seed with fewer is padded with itself at score 0. The count
+    that the last kept partner has is found from a histogram of the seed's counts, so
+    one pass keeps those above it (at most ``set_size - 1``, placed by insertion) and
+    one takes the first of those equal to it."""
+    histogram = np.zeros(64, dtype=np.int64)
+    kept_rows = np.empty(set_size, dtype=np.int64)
+    kept_counts = np.empty(set_size, dtype=np.int64)
+    for s in range(start, stop):
+        a, b = starts[s], starts[s + 1]
+        if b - a <= set_size:
+            cut = -1  # every partner is kept
+        else:
+            top = 0
+            for p in range(a, b):
+                top = max(top, shared[p])
+            if top >= histogram.shape[0]:
+                histogram = np.zeros(2 * (top + 1), dtype=np.int64)
+            histogram[: top + 1] = 0
+            for p in range(a, b):
+                histogram[shared[p]] += 1
+            cut = top
+            total = histogram[cut]
+            while total < set_size:
+                cut -= 1
+                total += histogram[cut]
+        kept = 0
+        for p in range(a, b):
+            value = shared[p]
+            if value > cut:
+                r = kept
+                while r > 0 and kept_counts[r - 1] < value:
+                    kept_rows[r] = kept_rows[r - 1]
+                    kept_counts[r] = kept_counts[r - 1]
+                    r -= 1
+                kept_rows[r] = partners[p]
+                kept_counts[r] = value
+                kept += 1
+        if cut >= 0:
+            for p in range(a, b):
+                if kept == set_size:
+                    break
+                if shared[p] == cut:
+                    kept_rows[kept] = partners[p]
+                    kept_counts[kept] = cut
+                    kept += 1
+        for r in range(set_size):
+            if r < kept:
+                members[s, r] = kept_rows[r]
+                scores[s, r] = kept_counts[r]
+            else:
+                members[s, r] = seeds[s]
 
 
 @kernel(nogil=True)
@@ -260,8 +336,11 @@ def compatibility_graphs(
         source_index, target_index = (np.asarray(e, dtype=np.int64) for e in endpoints)
     second_threshold = threshold if second_threshold is None else second_threshold
     words = (m + 63) // 64
-    bits = np.zeros((m, words), dtype=np.uint64)
-    second = bits if second_threshold == threshold else np.zeros((m, words), dtype=np.uint64)
+    # Rows padded with zero words to whole vectors of ROW_ALIGN words, which the
+    # common-neighbour counts then read without a remainder loop.
+    shape = (m, -(-words // ROW_ALIGN) * ROW_ALIGN)
+    bits = np.zeros(shape, dtype=np.uint64)
+    second = bits if second_threshold == threshold else np.zeros(shape, dtype=np.uint64)
     degree = np.zeros(m, dtype=np.int64)
     run_blocks(
         _compatibility_bits,
@@ -284,15 +363,38 @@ def compatibility_graphs(
 def consensus_sets(
     bits: np.ndarray, second: np.ndarray, seeds: np.ndarray, set_size: int, n_threads: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Every seed's ``set_size`` best partners and their scores (see
-    :func:`_consensus_sets`), ``(n_seeds, set_size)`` each, on ``n_threads`` threads."""
-    n = len(seeds)
-    members = np.empty((n, set_size), dtype=np.int64)
-    scores = np.zeros((n, set_size), dtype=np.float64)
-    seeds = np.ascontiguousarray(seeds, dtype=np.int64)
-    arrays = (bits, second, seeds, int(set_size), members, scores)
-    run_blocks(_consensus_sets, (n + 63) // 64, n_threads, *arrays)
-    return members, scores
+    """Every seed's ``set_size`` best partners and their scores, ``(n_seeds, set_size)``
+    each, on ``n_threads`` threads: the matches compatible with the seed in ``bits``
+    with the most matches compatible with both in ``second`` (the second-order
+    compatibility), most first, of equal ones the lower index; a seed with fewer
+    compatible matches is padded with itself at score 0. Two seeds compatible both ways
+    (every pair of :func:`compatibility_graphs`) have their common neighbours counted
+    once (:func:`_shared_counts`, :func:`_mirror_counts`, :func:`_best_partners`)."""
+    seeds = np.asarray(seeds, dtype=np.int64)
+    unique, back = np.unique(seeds, return_inverse=True)
+    members = np.empty((len(unique), set_size), dtype=np.int64)
+    scores = np.zeros((len(unique), set_size), dtype=np.float64)
+    starts = _row_starts(bits, unique)
+    # Seeds in runs of about SETS_ENTRIES listed partners (one seed at least): memory
+    # stays bounded on dense graphs; two seeds of different runs are counted from both.
+    cuts = np.searchsorted(starts, np.arange(SETS_ENTRIES, starts[-1], SETS_ENTRIES), "right")
+    bounds = np.unique(np.r_[0, np.maximum(cuts - 1, 1), len(unique)])
+    rank = np.full(len(bits), -1, dtype=np.int64)
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        run = unique[a:b]
+        rank[run] = np.arange(len(run))
+        offsets = starts[a : b + 1] - starts[a]
+        partners = np.empty(offsets[-1], dtype=np.int32)
+        shared = np.empty(offsets[-1], dtype=np.int32)
+        arrays = (bits, second, run, rank, offsets, partners, shared)
+        run_blocks(_shared_counts, len(run), n_threads, *arrays)
+        _mirror_counts(bits, run, rank, offsets, partners, shared)
+        arrays = (run, offsets, partners, shared, int(set_size), members[a:b], scores[a:b])
+        run_blocks(_best_partners, len(run), n_threads, *arrays)
+        rank[run] = -1
+    if len(unique) == len(seeds) and np.array_equal(unique, seeds):
+        return members, scores
+    return members[back], scores[back]
 
 
 def truncated_scores(

@@ -266,6 +266,53 @@ def _reference_graphs(source, target, threshold, second, min_span, ends):
     return keep & (gap < threshold), keep & (gap < second)
 
 
+def _assert_best_partners(members, scores, first, second, seeds, k):
+    """Each seed's ``k`` partners in ``first`` with the most common neighbours in
+    ``second`` (dense bool matrices), most first, of equal ones the lower index, padded
+    with the seed itself at score 0."""
+    shared = second.astype(np.int64) @ second.T.astype(np.int64)
+    for s, i in enumerate(seeds):
+        partners = np.flatnonzero(first[i])
+        order = partners[np.argsort(-shared[i, partners], kind="stable")][:k]
+        padded = np.r_[order, np.full(k - len(order), i)]
+        np.testing.assert_array_equal(members[s], padded)
+        np.testing.assert_array_equal(scores[s][: len(order)], shared[i, order])
+        assert not scores[s][len(order) :].any()
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_best_partners_on_any_graph_and_seed_list(symmetric):
+    """consensus_sets counts two seeds' common neighbours once and copies the count
+    across; on graphs with a diagonal (SC2-PCR's), one-way edges, seeds out of order
+    and repeated, and many tied counts, it still gives every seed the dense reference's
+    partners, on any number of threads."""
+    from o3d_rpointhop.registration.steps._consensus import consensus_sets
+
+    rng = np.random.default_rng(3 + symmetric)
+    m = 200
+    first = rng.random((m, m)) < 0.2
+    second = first & (rng.random((m, m)) < 0.6)
+    if symmetric:
+        first, second = np.triu(first), np.triu(second)
+        first, second = first | first.T, second | second.T
+    first[np.arange(m), np.arange(m)] = True  # every match compatible with itself
+
+    def pack(dense):
+        words = np.zeros((m, 8), dtype=np.uint64)  # padded beyond the 200 matches
+        packed = np.packbits(dense, axis=1, bitorder="little")
+        words.view(np.uint8)[:, : packed.shape[1]] = packed
+        return words
+
+    seeds = np.r_[rng.permutation(m)[:90], [7, 7, 150]]
+    k = 12
+    members, scores = consensus_sets(pack(first), pack(second), seeds, k)
+    _assert_best_partners(members, scores, first, second, seeds, k)
+    for n_threads in (2, 3):
+        again = consensus_sets(pack(first), pack(second), seeds, k, n_threads)
+        np.testing.assert_array_equal(again[0], members)
+        np.testing.assert_array_equal(again[1], scores)
+
+
 @pytest.mark.parametrize("m", [5, 64, 130])
 def test_the_kernels_match_a_dense_numpy_reference(m):
     """Graph bits, degrees, the seeds' best partners by common neighbours (ties to the
@@ -295,14 +342,7 @@ def test_the_kernels_match_a_dense_numpy_reference(m):
         np.testing.assert_array_equal(again[1], scores)
         threaded = compatibility_graphs(source, target, 0.1, 0.05, 0.2, ends, n_threads)
         np.testing.assert_array_equal(threaded[1], bits2)
-    shared = second.astype(np.int64) @ second.astype(np.int64)
-    for s, i in enumerate(seeds):
-        partners = np.flatnonzero(first[i])
-        order = partners[np.argsort(-shared[i, partners], kind="stable")][:k]
-        padded = np.r_[order, np.full(k - len(order), i)]
-        np.testing.assert_array_equal(members[s], padded)
-        np.testing.assert_array_equal(scores[s][: len(order)], shared[i, order])
-        assert not scores[s][len(order) :].any()
+    _assert_best_partners(members, scores, first, second, seeds, k)
 
     rot = np.stack([np.eye(3), np.diag([1.0, -1.0, -1.0])] * 40)[: m + 3]
     shift = rng.normal(scale=0.05, size=(len(rot), 3))
@@ -376,3 +416,18 @@ def test_ranking_puts_the_exactly_scored_first():
     # The best hypothesis overall (the smallest shift) is ranked first.
     best = np.flatnonzero(allowed)[np.argmin(np.linalg.norm(shifts[allowed], axis=1))]
     assert order[0] == best
+
+
+def test_best_partners_in_runs_of_seeds_are_the_same(monkeypatch):
+    """With the partners listed a few seeds at a time (a dense graph's memory bound),
+    every seed's partners and scores are those of one run."""
+    from o3d_rpointhop.registration.steps import _consensus
+
+    source, target, _, _ = synthetic_matches(300, 0.7, seed=5, noise=0.01)
+    bits, second, _ = _consensus.compatibility_graphs(source, target, 0.1, 0.05, 0.0, None)
+    seeds = np.arange(0, 300, 2)
+    whole = _consensus.consensus_sets(bits, second, seeds, 10)
+    monkeypatch.setattr(_consensus, "SETS_ENTRIES", 500)
+    runs = _consensus.consensus_sets(bits, second, seeds, 10, 2)
+    np.testing.assert_array_equal(runs[0], whole[0])
+    np.testing.assert_array_equal(runs[1], whole[1])
