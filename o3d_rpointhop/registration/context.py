@@ -289,7 +289,13 @@ class RegistrationContext:
             view = None if self.viewpoints is None else self.viewpoints[which]
             try:
                 self._features[key] = describe_global(
-                    descriptor, cloud, self.voxel_size, self.settings, view, n_turns
+                    descriptor,
+                    cloud,
+                    self.voxel_size,
+                    self.settings,
+                    view,
+                    n_turns,
+                    with_normals=lambda: self.with_normals(which, "global"),
                 )
             except ValueError as exc:
                 detail = (

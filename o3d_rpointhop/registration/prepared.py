@@ -11,6 +11,7 @@ the prepared scans.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -87,6 +88,7 @@ def describe_global(
     settings: Any = None,
     viewpoint: Any = None,
     n_turns: int = 1,
+    with_normals: Callable[[], o3d.geometry.PointCloud] | None = None,
 ) -> np.ndarray:
     """A global cloud's descriptors as every registration computes them: with the
     distances the descriptor leaves to the registration bound to its resolution
@@ -97,6 +99,11 @@ def describe_global(
     With ``n_turns`` above 1, the descriptors under each turn of the local frames about
     their normals (``transform_turns``), ``(n_turns, n_points, width)``.
 
+    ``with_normals``: the same cloud with the normals :func:`estimate_normals` gives it
+    at ``settings.normal_radius`` (a pair's context estimates them once); a descriptor
+    that would estimate exactly those and takes a cloud's own (:func:`_same_normals`:
+    FPFH at its ``"auto"`` radius) describes that cloud instead, to the same bits.
+
     Raises
     ------
     TypeError
@@ -105,6 +112,8 @@ def describe_global(
     """
     at = getattr(descriptor, "at_resolution", None)
     bound = descriptor if at is None else at(voxel, settings)
+    if with_normals is not None and _same_normals(bound, settings):
+        cloud = with_normals()
     if n_turns > 1:
         if not hasattr(bound, "transform_turns"):
             raise TypeError(
@@ -114,6 +123,19 @@ def describe_global(
             )
         return np.asarray(call_with_viewpoints(bound.transform_turns, cloud, viewpoint, n_turns))
     return np.asarray(call_with_viewpoints(bound.transform, cloud, viewpoint))
+
+
+def _same_normals(descriptor: Any, settings: Any) -> bool:
+    """Whether ``descriptor`` (bound to the registration's resolution) takes a cloud's
+    own normals and, for a cloud without, estimates them as :func:`estimate_normals`
+    does at ``settings.normal_radius``: the same radius and neighbours, so the same
+    normals."""
+    return (
+        settings is not None
+        and getattr(descriptor, "use_existing_normals", False) is True
+        and getattr(descriptor, "normal_max_nn", None) == NORMAL_NEIGHBOURS
+        and getattr(descriptor, "normal_radius", None) == settings.normal_radius
+    )
 
 
 def prepare_cloud(

@@ -280,3 +280,31 @@ def test_clouds_with_normals_are_cached_by_typed_keys_and_shared():
     estimate_normals(expected, 3 * context.settings.normal_radius)
     np.testing.assert_array_equal(np.asarray(coarse.normals), np.asarray(expected.normals))
     assert context.with_normals("source", "global") is not context.with_normals("target", "global")
+
+
+@pytest.mark.parametrize("radius", ["auto", 0.05])
+def test_fpfh_takes_the_contexts_normals_only_when_they_are_its_own(monkeypatch, radius):
+    """FPFH at the registration's normal radius describes the global cloud with the
+    normals the context estimated for it (one estimate per cloud, not two), to the
+    same bits as estimating its own; at another radius it estimates its own."""
+    from o3d_rpointhop import FPFHTransformer
+    from o3d_rpointhop.registration.prepared import describe_global
+
+    cloud = make_object(3000, shape_seed=4)
+    context = RegistrationContext(cloud, cloud + 0.05, n_global_points=800)
+    fpfh = FPFHTransformer(normal_radius=radius)
+    alone = describe_global(
+        fpfh, context.global_cloud("source"), context.voxel_size, context.settings
+    )
+    calls = []
+    estimate = o3d.geometry.PointCloud.estimate_normals
+
+    def counted(self, *args, **kwargs):
+        calls.append(len(self.points))
+        return estimate(self, *args, **kwargs)
+
+    monkeypatch.setattr(o3d.geometry.PointCloud, "estimate_normals", counted)
+    context.with_normals("source", "global")  # as the verification asks for them
+    shared = context.features(fpfh, "source")
+    np.testing.assert_array_equal(shared, alone)
+    assert len(calls) == (1 if radius == "auto" else 2)
