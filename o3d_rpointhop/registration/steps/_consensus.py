@@ -109,7 +109,6 @@ def _compatibility_bits(
     target_index,
     bits,
     second,
-    degree,
 ):  # pragma: no cover - compiled
     """The compatibility graphs as bit rows: bit ``j`` of row ``i`` set when matches
     ``i != j`` keep their length to within ``threshold`` (first order) or
@@ -117,53 +116,96 @@ def _compatibility_bits(
     pair is masked: its lengths sum to less than ``min_span`` (too close on both sides
     to say anything about a rotation) or the two matches share a source or a target
     point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Writes the
-    blocks of 64 rows ``start:stop`` of both graphs ``bits`` and ``second`` (uint64, ``m``
-    rows of at least ``ceil(m / 64)`` words, the same array when the thresholds are
-    equal; the words beyond are left as they are) and of the first graph's degrees.
+    words from the diagonal's on of the blocks of 64 rows ``start:stop`` of both graphs
+    ``bits`` and ``second`` (uint64, ``m`` rows of at least ``ceil(m / 64)`` words, the
+    same array when the thresholds are equal); :func:`_mirror_bits` fills the rest.
 
-    Every row is built on its own: its lengths first (one pass over the matches, in
-    SIMD lanes), then its words. Each pair is measured from both ends, with the same
-    bits either way (the differences only change sign)."""
+    A pair's bits are the same from either end (its differences only change sign), so
+    each row is built from its block's first column on: its lengths first (one pass in
+    SIMD lanes over views that start there, whose indices the compiler knows are not
+    negative), then its words."""
     m = source.shape[1]
     words = (m + 63) // 64
     same = second_threshold == threshold
-    sx, sy, sz = source[0], source[1], source[2]
-    tx, ty, tz = target[0], target[1], target[2]
     ds = np.empty(m)
     dt = np.empty(m)
+    x0, y0, z0 = source[0], source[1], source[2]
+    x1, y1, z1 = target[0], target[1], target[2]
     for block in range(start, stop):
-        for i in range(block * 64, min(m, block * 64 + 64)):
-            xi, yi, zi = sx[i], sy[i], sz[i]
-            ui, vi, wi = tx[i], ty[i], tz[i]
-            for j in range(m):
+        first = block * 64
+        sx, sy, sz = x0[first:], y0[first:], z0[first:]
+        tx, ty, tz = x1[first:], y1[first:], z1[first:]
+        near, far = ds[first:], dt[first:]
+        ends_s, ends_t = source_index[first:], target_index[first:]
+        for i in range(first, min(m, first + 64)):
+            xi, yi, zi = x0[i], y0[i], z0[i]
+            ui, vi, wi = x1[i], y1[i], z1[i]
+            for j in range(sx.shape[0]):
                 dx = xi - sx[j]
                 dy = yi - sy[j]
                 dz = zi - sz[j]
-                ds[j] = np.sqrt(dx * dx + dy * dy + dz * dz)
+                near[j] = np.sqrt(dx * dx + dy * dy + dz * dz)
                 dx = ui - tx[j]
                 dy = vi - ty[j]
                 dz = wi - tz[j]
-                dt[j] = np.sqrt(dx * dx + dy * dy + dz * dz)
+                far[j] = np.sqrt(dx * dx + dy * dy + dz * dz)
             own_source, own_target = source_index[i], target_index[i]
-            count = 0
-            for w in range(words):
+            for w in range(words - block):  # from the block's diagonal word on
                 word = np.uint64(0)
                 word2 = np.uint64(0)
-                for b in range(min(64, m - w * 64)):
+                for b in range(min(64, sx.shape[0] - w * 64)):
                     j = w * 64 + b
-                    a, c = ds[j], dt[j]
+                    a, c = near[j], far[j]
                     keep = (
-                        (a + c >= min_span)
-                        & (source_index[j] != own_source)
-                        & (target_index[j] != own_target)
+                        (a + c >= min_span) & (ends_s[j] != own_source) & (ends_t[j] != own_target)
                     )
                     gap = abs(a - c)
                     word |= np.uint64(keep & (gap < threshold)) << np.uint64(b)
                     word2 |= np.uint64(keep & (gap < second_threshold)) << np.uint64(b)
-                bits[i, w] = word
-                count += popcount(word)
+                bits[i, block + w] = word
                 if not same:
-                    second[i, w] = word2
+                    second[i, block + w] = word2
+
+
+@kernel(inline="always")
+def _transpose_tile(tile):  # pragma: no cover - compiled
+    """Transpose a 64 x 64 bit matrix in place (row ``c``'s bit ``r`` becomes row
+    ``r``'s bit ``c``), swapping the off-diagonal halves of ever smaller blocks."""
+    width = 32
+    mask = np.uint64(0x00000000FFFFFFFF)
+    while width:
+        shift = np.uint64(width)
+        for k in range(64):
+            if k & width:
+                continue
+            t = ((tile[k] >> shift) ^ tile[k + width]) & mask
+            tile[k] ^= t << shift
+            tile[k + width] ^= t
+        width //= 2
+        mask ^= mask << np.uint64(width)
+
+
+@kernel(nogil=True)
+def _mirror_bits(start, stop, m, same, bits, second, degree):  # pragma: no cover - compiled
+    """For the blocks of 64 rows ``start:stop``: each word left of the block's diagonal
+    word, the transposed tile across the diagonal that :func:`_compatibility_bits`
+    built (``second``'s too unless ``same``), and the first graph's degrees."""
+    tile = np.zeros(64, dtype=np.uint64)
+    for block in range(start, stop):
+        first = block * 64
+        rows = min(64, m - first)
+        for graph in range(1 if same else 2):
+            out = bits if graph == 0 else second
+            for w in range(block):
+                for c in range(64):
+                    tile[c] = out[w * 64 + c, block]  # w < block: all 64 rows exist
+                _transpose_tile(tile)
+                for r in range(rows):
+                    out[first + r, w] = tile[r]
+        for i in range(first, first + rows):
+            count = 0
+            for w in range(bits.shape[1]):
+                count += popcount(bits[i, w])
             degree[i] = count
 
 
@@ -247,41 +289,44 @@ def _best_partners(
     kept_rows = np.empty(set_size, dtype=np.int64)
     kept_counts = np.empty(set_size, dtype=np.int64)
     for s in range(start, stop):
-        a, b = starts[s], starts[s + 1]
-        if b - a <= set_size:
+        # The seed's counts and partners as views from 0 (indices the compiler knows
+        # are not negative).
+        counts, rows = shared[starts[s] : starts[s + 1]], partners[starts[s] : starts[s + 1]]
+        n = counts.shape[0]
+        if n <= set_size:
             cut = -1  # every partner is kept
         else:
             top = 0
-            for p in range(a, b):
-                top = max(top, shared[p])
+            for p in range(n):
+                top = max(top, counts[p])
             if top >= histogram.shape[0]:
                 histogram = np.zeros(2 * (top + 1), dtype=np.int64)
             histogram[: top + 1] = 0
-            for p in range(a, b):
-                histogram[shared[p]] += 1
+            for p in range(n):
+                histogram[counts[p]] += 1
             cut = top
             total = histogram[cut]
             while total < set_size:
                 cut -= 1
                 total += histogram[cut]
         kept = 0
-        for p in range(a, b):
-            value = shared[p]
+        for p in range(n):
+            value = counts[p]
             if value > cut:
                 r = kept
                 while r > 0 and kept_counts[r - 1] < value:
                     kept_rows[r] = kept_rows[r - 1]
                     kept_counts[r] = kept_counts[r - 1]
                     r -= 1
-                kept_rows[r] = partners[p]
+                kept_rows[r] = rows[p]
                 kept_counts[r] = value
                 kept += 1
         if cut >= 0:
-            for p in range(a, b):
+            for p in range(n):
                 if kept == set_size:
                     break
-                if shared[p] == cut:
-                    kept_rows[kept] = partners[p]
+                if counts[p] == cut:
+                    kept_rows[kept] = rows[p]
                     kept_counts[kept] = cut
                     kept += 1
         for r in range(set_size):
@@ -308,16 +353,22 @@ def _truncated_scores(
     for block in range(start, stop):
         first = block * 64
         last = min(n, first + 64)
+        # The block's lanes as views from 0: indices the compiler knows are not
+        # negative, so the lanes vectorise.
+        r0, r1, r2 = rot[0][first:last], rot[1][first:last], rot[2][first:last]
+        r3, r4, r5 = rot[3][first:last], rot[4][first:last], rot[5][first:last]
+        r6, r7, r8 = rot[6][first:last], rot[7][first:last], rot[8][first:last]
+        t0, t1, t2 = shift[0][first:last], shift[1][first:last], shift[2][first:last]
         total = np.zeros(last - first)
         for i in range(m):
             x0, x1, x2 = source[i, 0], source[i, 1], source[i, 2]
             y0, y1, y2 = target[i, 0], target[i, 1], target[i, 2]
-            for h in range(first, last):
-                a = rot[0, h] * x0 + rot[1, h] * x1 + rot[2, h] * x2 + shift[0, h] - y0
-                b = rot[3, h] * x0 + rot[4, h] * x1 + rot[5, h] * x2 + shift[1, h] - y1
-                c = rot[6, h] * x0 + rot[7, h] * x1 + rot[8, h] * x2 + shift[2, h] - y2
-                r2 = a * a + b * b + c * c
-                total[h - first] += (1.0 - r2 / sq_threshold) if r2 < sq_threshold else 0.0
+            for h in range(total.shape[0]):
+                a = r0[h] * x0 + r1[h] * x1 + r2[h] * x2 + t0[h] - y0
+                b = r3[h] * x0 + r4[h] * x1 + r5[h] * x2 + t1[h] - y1
+                c = r6[h] * x0 + r7[h] * x1 + r8[h] * x2 + t2[h] - y2
+                squared = a * a + b * b + c * c
+                total[h] += (1.0 - squared / sq_threshold) if squared < sq_threshold else 0.0
         out[first:last] = total
 
 
@@ -355,8 +406,9 @@ def compatibility_graphs(
         np.ascontiguousarray(target_index),
         bits,
         second,
-        degree,
+        per_thread=4,  # the blocks' rows shorten along the diagonal: smaller pieces
     )
+    run_blocks(_mirror_bits, words, n_threads, m, second is bits, bits, second, degree)
     return bits, second, degree
 
 
