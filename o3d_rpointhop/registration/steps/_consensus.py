@@ -115,10 +115,11 @@ def _compatibility_bits(
     ``second_threshold`` (the graph whose common neighbours are counted), unless the
     pair is masked: its lengths sum to less than ``min_span`` (too close on both sides
     to say anything about a rotation) or the two matches share a source or a target
-    point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Writes the
-    words from the diagonal's on of the blocks of 64 rows ``start:stop`` of both graphs
-    ``bits`` and ``second`` (uint64, ``m`` rows of at least ``ceil(m / 64)`` words, the
-    same array when the thresholds are equal); :func:`_mirror_bits` fills the rest.
+    point. ``source`` and ``target`` come as ``(3, m)`` coordinate rows. Writes, for the
+    blocks of 64 rows ``start:stop``, each row's words from its block's diagonal word
+    on, of both graphs ``bits`` and ``second`` (uint64, ``m`` rows of at least
+    ``ceil(m / 64)`` words, the same array when the thresholds are equal);
+    :func:`_mirror_bits` fills the words before.
 
     A pair's bits are the same from either end (its differences only change sign), so
     each row is built from its block's first column on: its lengths first (one pass in
