@@ -192,7 +192,8 @@ def _register_pair(
     (its flags are measured there too; ``source`` and ``target`` are not needed), and
     returns the transformation, its edge fitness (the share of source points within
     the settings' ``edge_distance``; 0 for a result that did not converge) and Open3D's
-    information matrix at that distance (in the pair's centred frame). Refining runs
+    information matrix at that distance (in the pair's centred frame; None for a pair
+    whose edge fitness falls below ``min_fitness``, which no edge needs). Refining runs
     ``register()``'s point-to-plane ICP from ``init``, ending on the full scans, and
     returns the transformation and the information matrix there (fitness None: a kept
     edge keeps the fitness that made it one, so neither it nor the flags are measured
@@ -234,6 +235,8 @@ def _register_pair(
         local = step.run(context, context.to_local(np.asarray(init, dtype=np.float64)))
         local = local.transformation
         transformation, fitness = context.to_world(local), None
+    if fitness is not None and min_fitness is not None and fitness < min_fitness:
+        return transformation, fitness, None  # no edge: its information is never read
     with repeatable_open3d():
         information = reg.get_information_matrix_from_point_clouds(*context.clouds(), edge, local)
     # In the coordinates the scans were given in, as the pose graph's edges are.
