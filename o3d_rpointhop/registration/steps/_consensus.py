@@ -377,9 +377,11 @@ def compatibility_graphs(
     source, target, threshold, second_threshold, min_span, endpoints, n_threads=1
 ):
     """Both compatibility graphs of the matches ``source[i] <-> target[i]``, packed 64
-    matches to a word, and the first's degrees (see :func:`_compatibility_bits`);
-    ``endpoints`` None masks no shared endpoint. The consensus step and the SC2-PCR
-    peer build their graphs with it."""
+    matches to a word (``(m, w)`` uint64, ``w`` the words ``m`` bits take rounded up to
+    a multiple of :data:`ROW_ALIGN`, the spare words zero; the same array twice when
+    the thresholds are equal), and the first's degrees (see
+    :func:`_compatibility_bits`); ``endpoints`` None masks no shared endpoint. The
+    consensus step and the SC2-PCR peer build their graphs with it."""
     m = len(source)
     if endpoints is None:
         # Distinct ids on both sides: no pair shares an endpoint.

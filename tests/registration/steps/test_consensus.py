@@ -431,3 +431,15 @@ def test_best_partners_in_runs_of_seeds_are_the_same(monkeypatch):
     runs = _consensus.consensus_sets(bits, second, seeds, 10, 2)
     np.testing.assert_array_equal(runs[0], whole[0])
     np.testing.assert_array_equal(runs[1], whole[1])
+
+
+def test_graph_rows_are_whole_vectors_with_zero_spare_words():
+    """Rows are padded to ROW_ALIGN words; the spare words stay zero, so every reader
+    that walks whole rows sees the same graph."""
+    from o3d_rpointhop.registration.steps import _consensus
+
+    source, target, _, _ = synthetic_matches(130, 0.9, seed=6, noise=0.0)
+    bits, second, degree = _consensus.compatibility_graphs(source, target, 0.1, 0.05, 0.0, None)
+    assert bits.shape == second.shape == (130, _consensus.ROW_ALIGN)
+    assert not bits[:, 3:].any() and not second[:, 3:].any()  # 130 matches take 3 words
+    assert bits[:, 2].any()  # the third word holds matches 128 and 129
