@@ -480,179 +480,149 @@ def register_multiway(
     ValueError
         For fewer than two clouds, or a cloud that is not a valid point cloud.
     """
+    seed = renamed_seed(random_state, seed, "register_multiway")
     with core_budget(n_jobs):
-        return _register_multiway(
-            clouds,
-            descriptor,
-            viewpoints,
-            global_method,
-            voxel_size,
-            n_global_points,
-            min_fitness,
-            max_violation,
-            n_jobs,
-            progress,
-            renamed_seed(random_state, seed, "register_multiway"),
-            settings,
-            sequential,
+        start = time.perf_counter()
+        if len(clouds) < 2:
+            raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
+        points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
+        descriptor, viewpoints, choice = resolve_model(descriptor, viewpoints, points)
+        if choice is not None:
+            descriptor, choice = chosen_model(descriptor, choice)
+        views = as_viewpoints(viewpoints, len(points))
+        n = len(points)
+        # The scans in a canonical order, by content: the same files in any order give the
+        # same pairs, in the same directions, and the same poses. canon[c]: the given
+        # index of the scan at canonical place c.
+        canon = _canonical_order(points)
+        points = [points[k] for k in canon]
+        views = [views[k] for k in canon]
+        # Every scan in its own frame centred on its centroid, for the whole run: edges,
+        # information matrices and the optimisation stay well conditioned at survey
+        # coordinates, and a scan set gives the same edges and poses wherever each of its
+        # scans lies, in one frame or several. Results go back at the end.
+        centres = [p.mean(axis=0) for p in points]
+        points = [p - c for p, c in zip(points, centres, strict=True)]
+        views = [None if v is None else v - c for v, c in zip(views, centres, strict=True)]
+        worker = worker_copy(descriptor if descriptor is not None else default_descriptor())
+        # The screening step, resolved and checked as register() does (copied per pair),
+        # without register()'s FPFH fallback: the rooms were chosen with the model alone.
+        global_method = build_chain(global_method, None, worker, fpfh_fallback=False)[0][1]
+        global_method = _screening_step(global_method, all(v is not None for v in views))
+        if voxel_size == "auto":
+            voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
+        else:
+            voxel = float(voxel_size)
+        settings = (settings or RegistrationSettings()).at(voxel)
+        # Every scan is downsampled, described and given normals once, for all its pairs.
+        try:
+            prepared = parallel_map(
+                _prepare_scan,
+                [
+                    (canon[c], p, voxel, worker, view, settings.normal_radius, settings)
+                    for c, (p, view) in enumerate(zip(points, views, strict=True))
+                ],
+                n_jobs=n_jobs,
+                progress=progress,
+                desc="describe",
+                unit="scan",
+            )
+        except ValueError as exc:
+            if voxel_size != "auto":
+                raise
+            # Say which scan made the common resolution as coarse as it is.
+            n_points = resolve_global_points(n_global_points, worker)
+            setter = int(np.argmax([common_voxel([p], n_points) for p in points]))
+            raise ValueError(
+                f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan "
+                f"{canon[setter]} ({len(points[setter])} points) needs: too small a scan "
+                "coarsens them all)"
+            ) from exc
+        features = [p.features for p in prepared]
+        place = {k: c for c, k in enumerate(canon)}
+        sequence = [place[k] for k in range(n)] if sequential else None
+        candidates = _candidates(features, RETRIEVED_NEIGHBOURS, sequence)
+        log.info(
+            "%d scans prepared at resolution %.4g; screening %d candidate pairs with %s",
+            len(points),
+            voxel,
+            len(candidates),
+            global_method.name,
         )
-
-
-def _register_multiway(
-    clouds,
-    descriptor,
-    viewpoints,
-    global_method,
-    voxel_size,
-    n_global_points,
-    min_fitness,
-    max_violation,
-    n_jobs,
-    progress,
-    seed,
-    settings,
-    sequential,
-) -> MultiwayResult:
-    """:func:`register_multiway`'s work, inside the caller's core budget."""
-    start = time.perf_counter()
-    if len(clouds) < 2:
-        raise ValueError(f"register_multiway needs at least two clouds, got {len(clouds)}")
-    points = [as_points(c, f"clouds[{k}]") for k, c in enumerate(clouds)]
-    descriptor, viewpoints, choice = resolve_model(descriptor, viewpoints, points)
-    if choice is not None:
-        descriptor, choice = chosen_model(descriptor, choice)
-    views = as_viewpoints(viewpoints, len(points))
-    n = len(points)
-    # The scans in a canonical order, by content: the same files in any order give the
-    # same pairs, in the same directions, and the same poses. canon[c]: the given
-    # index of the scan at canonical place c.
-    canon = _canonical_order(points)
-    points = [points[k] for k in canon]
-    views = [views[k] for k in canon]
-    # Every scan in its own frame centred on its centroid, for the whole run: edges,
-    # information matrices and the optimisation stay well conditioned at survey
-    # coordinates, and a scan set gives the same edges and poses wherever each of its
-    # scans lies, in one frame or several. Results go back at the end.
-    centres = [p.mean(axis=0) for p in points]
-    points = [p - c for p, c in zip(points, centres, strict=True)]
-    views = [None if v is None else v - c for v, c in zip(views, centres, strict=True)]
-    worker = worker_copy(descriptor if descriptor is not None else default_descriptor())
-    # The screening step, resolved and checked as register() does (copied per pair),
-    # without register()'s FPFH fallback: the rooms were chosen with the model alone.
-    global_method = build_chain(global_method, None, worker, fpfh_fallback=False)[0][1]
-    global_method = _screening_step(global_method, all(v is not None for v in views))
-    if voxel_size == "auto":
-        voxel = common_voxel(points, resolve_global_points(n_global_points, worker))
-    else:
-        voxel = float(voxel_size)
-    settings = (settings or RegistrationSettings()).at(voxel)
-    # Every scan is downsampled, described and given normals once, for all its pairs.
-    try:
-        prepared = parallel_map(
-            _prepare_scan,
+        results = parallel_map(
+            _register_pair,
             [
-                (canon[c], p, voxel, worker, view, settings.normal_radius, settings)
-                for c, (p, view) in enumerate(zip(points, views, strict=True))
+                (None, None, prepared[j], prepared[i], settings, seed, None, None, global_method)
+                + (min_fitness, (views[j], views[i]))
+                for i, j in candidates
             ],
             n_jobs=n_jobs,
             progress=progress,
-            desc="describe",
-            unit="scan",
+            desc="pairs",
+            unit="pair",
         )
-    except ValueError as exc:
-        if voxel_size != "auto":
-            raise
-        # Say which scan made the common resolution as coarse as it is.
-        n_points = resolve_global_points(n_global_points, worker)
-        setter = int(np.argmax([common_voxel([p], n_points) for p in points]))
-        raise ValueError(
-            f"{exc} (downsampled to the common resolution {voxel:.4g}, which scan "
-            f"{canon[setter]} ({len(points[setter])} points) needs: too small a scan "
-            "coarsens them all)"
-        ) from exc
-    features = [p.features for p in prepared]
-    place = {k: c for c, k in enumerate(canon)}
-    sequence = [place[k] for k in range(n)] if sequential else None
-    candidates = _candidates(features, RETRIEVED_NEIGHBOURS, sequence)
-    log.info(
-        "%d scans prepared at resolution %.4g; screening %d candidate pairs with %s",
-        len(points),
-        voxel,
-        len(candidates),
-        global_method.name,
-    )
-    results = parallel_map(
-        _register_pair,
-        [
-            (None, None, prepared[j], prepared[i], settings, seed, None, None, global_method)
-            + (min_fitness, (views[j], views[i]))
-            for i, j in candidates
-        ],
-        n_jobs=n_jobs,
-        progress=progress,
-        desc="pairs",
-        unit="pair",
-    )
-    pairs = {pair: (t, f) for pair, (t, f, _) in zip(candidates, results, strict=True)}
-    fitting = {p: r for p, r in zip(candidates, results, strict=True) if r[1] >= min_fitness}
-    seen = _free_space(fitting, prepared, views, voxel)
-    limit = 1.0 if max_violation is None else max_violation
-    edges = {p: r for p, r in fitting.items() if seen.get(p, 0.0) <= limit}
-    if len(edges) < len(fitting):
+        pairs = {pair: (t, f) for pair, (t, f, _) in zip(candidates, results, strict=True)}
+        fitting = {p: r for p, r in zip(candidates, results, strict=True) if r[1] >= min_fitness}
+        seen = _free_space(fitting, prepared, views, voxel)
+        limit = 1.0 if max_violation is None else max_violation
+        edges = {p: r for p, r in fitting.items() if seen.get(p, 0.0) <= limit}
+        if len(edges) < len(fitting):
+            log.info(
+                "%d fitting pairs left out: they put over %.2f of a scan in space the other "
+                "sensor saw empty",
+                len(fitting) - len(edges),
+                limit,
+            )
         log.info(
-            "%d fitting pairs left out: they put over %.2f of a scan in space the other "
-            "sensor saw empty",
-            len(fitting) - len(edges),
-            limit,
+            "%d of %d pairs fit (edge fitness >= %.2f)", len(edges), len(candidates), min_fitness
         )
-    log.info("%d of %d pairs fit (edge fitness >= %.2f)", len(edges), len(candidates), min_fitness)
-    for (i, j), (_, fitness, _) in zip(candidates, results, strict=True):
-        log.debug("pair %d-%d: edge fitness %.3f", canon[i], canon[j], fitness)
-    # Rooted in the largest part the edges join, not in whichever scan came first.
-    (root, *_), every_part = largest_part(edges, n)
-    tree = spanning_tree(edges, n)
-    work = (edges, tree, points, prepared, settings, seed, n_jobs, progress)
-    graph, poses, kept = _reconstruct_part(root, *work)
-    placed = [c for c, p in enumerate(poses) if p is not None]  # the graph's nodes
-    log.info("pose graph: %d edges kept, %d of %d scans placed", len(kept), len(placed), n)
-    # Back in the given order and coordinates, in the frame of the placed scan given
-    # first (scan 0 whenever it is placed).
-    given_poses, frame = _in_given_frame(poses, canon, centres)
-    # Every smaller part of two scans or more is reconstructed the same way, on its own
-    # (as COLMAP returns several models), in the frame of its scan given first.
-    part_poses = [given_poses]
-    for part in every_part[1:]:
-        if len(part) > 1:
-            own = _reconstruct_part(part[0], *work)[1]
-            part_poses.append(_in_given_frame(own, canon, centres)[0])
-        else:
-            alone = [None] * n
-            alone[canon[part[0]]] = np.eye(4)
-            part_poses.append(alone)
-    given_pairs = {}
-    for (i, j), (t, f) in pairs.items():
-        moved = from_centred(t, centres[i], centres[j])  # scan j into scan i
-        a, b = canon[i], canon[j]
-        given_pairs[(a, b) if a < b else (b, a)] = (moved if a < b else np.linalg.inv(moved), f)
-    return MultiwayResult(
-        poses=given_poses,
-        pose_graph=_graph_about(graph, centres, placed, canon, given_poses),
-        pairs=dict(sorted(given_pairs.items())),
-        edges=sorted((min(canon[i], canon[j]), max(canon[i], canon[j])) for i, j in kept),
-        unconnected=sorted(canon[c] for c in range(n) if poses[c] is None),
-        voxel_size=voxel,
-        seconds=time.perf_counter() - start,
-        frame=canon[frame],
-        parts=[sorted(canon[c] for c in part) for part in every_part],
-        part_poses=part_poses,
-        model=None if choice is None else choice.as_dict(),
-        free_space={
-            (min(canon[i], canon[j]), max(canon[i], canon[j])): share
-            for (i, j), share in sorted(seen.items())
-        },
-        min_fitness=float(min_fitness),
-        max_violation=max_violation,
-    )
+        for (i, j), (_, fitness, _) in zip(candidates, results, strict=True):
+            log.debug("pair %d-%d: edge fitness %.3f", canon[i], canon[j], fitness)
+        # Rooted in the largest part the edges join, not in whichever scan came first.
+        (root, *_), every_part = largest_part(edges, n)
+        tree = spanning_tree(edges, n)
+        work = (edges, tree, points, prepared, settings, seed, n_jobs, progress)
+        graph, poses, kept = _reconstruct_part(root, *work)
+        placed = [c for c, p in enumerate(poses) if p is not None]  # the graph's nodes
+        log.info("pose graph: %d edges kept, %d of %d scans placed", len(kept), len(placed), n)
+        # Back in the given order and coordinates, in the frame of the placed scan given
+        # first (scan 0 whenever it is placed).
+        given_poses, frame = _in_given_frame(poses, canon, centres)
+        # Every smaller part of two scans or more is reconstructed the same way, on its own
+        # (as COLMAP returns several models), in the frame of its scan given first.
+        part_poses = [given_poses]
+        for part in every_part[1:]:
+            if len(part) > 1:
+                own = _reconstruct_part(part[0], *work)[1]
+                part_poses.append(_in_given_frame(own, canon, centres)[0])
+            else:
+                alone = [None] * n
+                alone[canon[part[0]]] = np.eye(4)
+                part_poses.append(alone)
+        given_pairs = {}
+        for (i, j), (t, f) in pairs.items():
+            moved = from_centred(t, centres[i], centres[j])  # scan j into scan i
+            a, b = canon[i], canon[j]
+            given_pairs[(a, b) if a < b else (b, a)] = (moved if a < b else np.linalg.inv(moved), f)
+        return MultiwayResult(
+            poses=given_poses,
+            pose_graph=_graph_about(graph, centres, placed, canon, given_poses),
+            pairs=dict(sorted(given_pairs.items())),
+            edges=sorted((min(canon[i], canon[j]), max(canon[i], canon[j])) for i, j in kept),
+            unconnected=sorted(canon[c] for c in range(n) if poses[c] is None),
+            voxel_size=voxel,
+            seconds=time.perf_counter() - start,
+            frame=canon[frame],
+            parts=[sorted(canon[c] for c in part) for part in every_part],
+            part_poses=part_poses,
+            model=None if choice is None else choice.as_dict(),
+            free_space={
+                (min(canon[i], canon[j]), max(canon[i], canon[j])): share
+                for (i, j), share in sorted(seen.items())
+            },
+            min_fitness=float(min_fitness),
+            max_violation=max_violation,
+        )
 
 
 def _free_space(fitting: dict, prepared: list, views: list, voxel: float) -> dict:
